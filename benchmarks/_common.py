@@ -1,0 +1,81 @@
+"""Shared helpers for the benchmark scripts: timing, the machine's name, and a report table.
+
+Every benchmark script measures the project's code next to its raw reference in the same run and
+prints one markdown table headed by the machine it ran on; ``--json PATH`` also saves the rows.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+
+
+def machine_description() -> str:
+    """CPU model, core count, torch threads and GPU (if any), as one line."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    parts = [cpu, f"{os.cpu_count()} cores", f"torch {torch.__version__}",
+             f"{torch.get_num_threads()} torch threads"]
+    if torch.cuda.is_available():
+        parts.append(f"GPU {torch.cuda.get_device_name(0)}")
+    return ", ".join(parts)
+
+
+def rate(fn: Callable[[], object], items_per_call: int, min_seconds: float = 2.0,
+         warmup_calls: int = 2, sync: Callable[[], None] | None = None) -> float:
+    """Items per second of ``fn``, timed over at least ``min_seconds`` after ``warmup_calls`` calls."""
+    for _ in range(warmup_calls):
+        fn()
+    if sync is not None:
+        sync()
+    calls = 0
+    start = time.perf_counter()
+    while True:
+        fn()
+        calls += 1
+        if sync is not None:
+            sync()
+        elapsed = time.perf_counter() - start
+        if elapsed >= min_seconds:
+            return calls * items_per_call / elapsed
+
+
+def seconds_per_call(fn: Callable[[], object], min_seconds: float = 2.0, warmup_calls: int = 2,
+                     sync: Callable[[], None] | None = None) -> float:
+    """Mean wall-clock seconds of one call of ``fn``."""
+    return 1.0 / rate(fn, 1, min_seconds, warmup_calls, sync)
+
+
+def report(title: str, rows: list[dict], json_path: str | None = None) -> None:
+    """Print ``rows`` (dicts with the same keys) as a markdown table under the machine's name."""
+    print(f"\n## {title}\nmachine: {machine_description()}\n")
+    if rows:
+        keys = list(rows[0])
+        print("| " + " | ".join(keys) + " |")
+        print("|" + "---|" * len(keys))
+        for row in rows:
+            cells = [f"{v:.4g}" if isinstance(v, float) else str(v) for v in row.values()]
+            print("| " + " | ".join(cells) + " |")
+    if json_path:
+        Path(json_path).write_text(json.dumps(
+            {"title": title, "machine": machine_description(), "rows": rows}, indent=2))
+
+
+def parse_args(description: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
+    parser.add_argument("--quick", action="store_true", help="shorter timings (for smoke runs)")
+    return parser.parse_args()

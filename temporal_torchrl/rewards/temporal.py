@@ -1,0 +1,159 @@
+"""The combined temporal reward r_t = r^task_t + rho (r_P(s_t) + lambda r_D(s_t)) (thesis 4.1)."""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from temporal_torchrl.rewards.directional import DIRECTIONAL
+from temporal_torchrl.rewards.heads import RewardHeads, heads_input_dims
+from temporal_torchrl.rewards.positional import POSITIONAL, PROJECTIONS
+
+REWARD_KEYS = ("task_reward", "positional_reward", "directional_reward", "vlm_reward", "reward")
+
+
+class TemporalReward(nn.Module):
+    """Positional and directional VLM rewards added to the sparse task reward (thesis 4.1):
+
+    r_t = r^task_t + rho (r^VLM_P(s_t) + lambda r^VLM_D(s_t)),  r^task_t = success_t - 1.
+
+    Args:
+        embedding_dim: size D of the image and text embeddings.
+        goal_embedding: g, the goal text embedding ``[D]``.
+        baseline_embedding: b, the baseline text embedding ``[D]``.
+        positional: a key of :data:`POSITIONAL` (``"furl"``, ``"p1"``-``"p4"``, ``"liv"``) or None.
+        directional: a key of :data:`DIRECTIONAL` (``"d1"``-``"d5"``) or None.
+        rho: weight of the VLM reward (>= 0; FuRL's default 0.05).
+        lambda_: weight of the directional reward relative to the positional one (>= 0).
+        k: history offset of s_{t-k} (>= 1). Carried here as configuration: the history transform
+            (:class:`~temporal_torchrl.transforms.EmbeddingHistoryTransform`) produces s_{t-k} and
+            should be built with ``k=reward.k``.
+        alpha: goal-baseline regularisation strength in [0, 1] (P3, P4, D5).
+        projection: ``"origin"`` (the thesis's release) or ``"line"`` (VLM-RMs); see
+            :mod:`temporal_torchrl.rewards.positional`.
+
+    Attributes:
+        positional_heads, directional_heads: the trainable :class:`RewardHeads` (f^P, f^D), or None
+            when that part is absent (and for the zero-shot ``"liv"``).
+
+    Example:
+        >>> import torch
+        >>> D = 8
+        >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
+        ...                         directional="d3", rho=1.0, lambda_=4.0)
+        >>> s = torch.randn(3, D)
+        >>> out = reward(s, s, s, torch.tensor([[False], [True], [False]]))
+        >>> out["reward"].shape, out["task_reward"].squeeze(-1).tolist()
+        (torch.Size([3, 1]), [-1.0, 0.0, -1.0])
+    """
+
+    def __init__(self, embedding_dim: int, goal_embedding: Tensor, baseline_embedding: Tensor,
+                 positional: str | None = "furl", directional: str | None = None,
+                 rho: float = 0.05, lambda_: float = 1.0, k: int = 5, alpha: float = 0.4,
+                 projection: str = "origin"):
+        super().__init__()
+        if isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) \
+                or embedding_dim < 1:
+            raise ValueError(f"embedding_dim={embedding_dim!r}; expected a positive integer.")
+        if positional is not None and positional not in POSITIONAL:
+            raise ValueError(f"Unknown positional reward {positional!r}; expected one of "
+                             f"{', '.join(POSITIONAL)} or None.")
+        if directional is not None and directional not in DIRECTIONAL:
+            raise ValueError(f"Unknown directional reward {directional!r}; expected one of "
+                             f"{', '.join(DIRECTIONAL)} or None.")
+        if not rho >= 0:
+            raise ValueError(f"rho={rho!r}; expected rho >= 0 (the weight of the VLM reward).")
+        if not lambda_ >= 0:
+            raise ValueError(f"lambda_={lambda_!r}; expected lambda_ >= 0 (the weight of the "
+                             "directional reward).")
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+            raise ValueError(f"k={k!r}; expected an integer >= 1 (the offset of s_(t-k)).")
+        if not 0.0 <= alpha <= 1.0:
+            raise ValueError(f"alpha={alpha!r}; expected 0 <= alpha <= 1 (the goal-baseline "
+                             "regularisation strength).")
+        if projection not in PROJECTIONS:
+            raise ValueError(f"projection={projection!r}; expected one of "
+                             f"{', '.join(PROJECTIONS)}.")
+        self.embedding_dim = embedding_dim
+        self.positional = positional
+        self.directional = directional
+        self.rho = float(rho)
+        self.lambda_ = float(lambda_)
+        self.k = k
+        self.alpha = float(alpha)
+        self.projection = projection
+        self.register_buffer("goal_embedding", self._text_embedding(goal_embedding, "goal"))
+        self.register_buffer("baseline_embedding",
+                             self._text_embedding(baseline_embedding, "baseline"))
+        self.positional_heads = (
+            RewardHeads(*heads_input_dims(positional, embedding_dim))
+            if positional not in (None, "liv") else None)
+        self.directional_heads = (
+            RewardHeads(*heads_input_dims(directional, embedding_dim))
+            if directional is not None else None)
+
+    def _text_embedding(self, value: Tensor, name: str) -> Tensor:
+        value = torch.as_tensor(value, dtype=torch.float32)
+        if value.shape != (self.embedding_dim,):
+            raise ValueError(
+                f"{name}_embedding has shape {tuple(value.shape)}; expected ({self.embedding_dim},)"
+                f" to match embedding_dim={self.embedding_dim}. Embed the {name} text with the "
+                "same encoder as the frames.")
+        return value
+
+    def _check_embedding(self, name: str, value: Tensor) -> None:
+        if value.shape[-1:] != (self.embedding_dim,):
+            raise ValueError(
+                f"{name} has size {value.shape[-1] if value.ndim else 'scalar'} in its last "
+                f"dimension; the reward heads expect embedding_dim={self.embedding_dim}. Use the "
+                "encoder the TemporalReward was built for (its .dim).")
+
+    def positional_reward(self, embedding: Tensor, initial_embedding: Tensor | None = None
+                          ) -> Tensor:
+        """r^VLM_P(s_t) of the configured variant, shape ``embedding.shape[:-1]``."""
+        self._check_embedding("embedding", embedding)
+        if self.positional is None:
+            raise ValueError("This TemporalReward has no positional part (positional=None).")
+        return POSITIONAL[self.positional](
+            self.positional_heads, embedding, s0=initial_embedding, g=self.goal_embedding,
+            b=self.baseline_embedding, alpha=self.alpha, projection=self.projection)
+
+    def directional_reward(self, embedding: Tensor, previous_embedding: Tensor,
+                           initial_embedding: Tensor | None = None,
+                           position: Tensor | None = None) -> Tensor:
+        """r^VLM_D of the direction ``embedding - previous_embedding`` at ``position``
+        (default ``embedding``), shape ``embedding.shape[:-1]``."""
+        self._check_embedding("embedding", embedding)
+        self._check_embedding("previous_embedding", previous_embedding)
+        if self.directional is None:
+            raise ValueError("This TemporalReward has no directional part (directional=None).")
+        return DIRECTIONAL[self.directional](
+            self.directional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
+            g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha,
+            position=position, projection=self.projection)
+
+    def forward(self, embedding: Tensor, initial_embedding: Tensor, previous_embedding: Tensor,
+                success: Tensor) -> dict[str, Tensor]:
+        """All reward parts for embeddings ``[..., D]`` and ``success`` ``[..., 1]``.
+
+        Returns a dict with ``"task_reward"`` (success - 1), ``"positional_reward"`` (r_P),
+        ``"directional_reward"`` (r_D), ``"vlm_reward"`` (r_P + lambda r_D) and ``"reward"``
+        (r_task + rho vlm), each float32 ``[..., 1]``; an absent part is 0.
+        """
+        self._check_embedding("initial_embedding", initial_embedding)
+        task = success.to(torch.float32) - 1.0
+        zeros = torch.zeros_like(task)
+        positional = (self.positional_reward(embedding, initial_embedding).unsqueeze(-1)
+                      if self.positional is not None else zeros)
+        directional = (self.directional_reward(embedding, previous_embedding,
+                                               initial_embedding).unsqueeze(-1)
+                       if self.directional is not None else zeros)
+        vlm = positional + self.lambda_ * directional
+        return {"task_reward": task, "positional_reward": positional,
+                "directional_reward": directional, "vlm_reward": vlm,
+                "reward": task + self.rho * vlm}
+
+    def extra_repr(self) -> str:
+        return (f"embedding_dim={self.embedding_dim}, positional={self.positional!r}, "
+                f"directional={self.directional!r}, rho={self.rho}, lambda_={self.lambda_}, "
+                f"k={self.k}, alpha={self.alpha}, projection={self.projection!r}")

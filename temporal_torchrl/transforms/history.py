@@ -1,0 +1,107 @@
+"""The k-step embedding history: s_0 and s_{t-k} next to every s_t (thesis 4.1, 4.3.2)."""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from torch import Tensor
+from torchrl.data import Composite
+from torchrl.envs.transforms import Transform
+
+INITIAL_EMBEDDING_KEY = "initial_embedding"
+PREVIOUS_EMBEDDING_KEY = "previous_embedding"
+
+
+class EmbeddingHistoryTransform(Transform):
+    """Writes ``"initial_embedding"`` (s_0) and ``"previous_embedding"`` (s_{t-k}) at every step.
+
+    s_0 is the first embedding of the current episode; s_{t-k} is the embedding k steps back in
+    the same episode, clamped to s_0 while t < k (the history never crosses an episode boundary).
+    Each batch element keeps a ring of its last k + 1 embeddings; a reset fills the ring of every
+    reset element with its new s_0, so partial resets of batched envs (the ``"_reset"`` mask)
+    restart only those elements. A single cursor serves the whole batch because all elements
+    step together.
+
+    The transform is stateful and runs only inside an environment: a sampled batch already
+    carries the two keys as they were collected, so :meth:`forward` raises.
+    Place it after the embedding transform, and on the outer env of a batched env.
+
+    Args:
+        k: history offset (>= 1); use the ``k`` of the :class:`TemporalReward`.
+        in_key: the embedding key to track.
+
+    Example:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> history = EmbeddingHistoryTransform(k=2)
+        >>> td = history._reset(TensorDict(), TensorDict({"embedding": torch.zeros(3)}))
+        >>> for t in range(1, 4):
+        ...     step = TensorDict({"embedding": torch.full((3,), float(t))})
+        ...     next_td = history._step(TensorDict(), step)
+        >>> next_td["previous_embedding"].tolist(), next_td["initial_embedding"].tolist()
+        ([1.0, 1.0, 1.0], [0.0, 0.0, 0.0])
+    """
+
+    def __init__(self, k: int = 5, in_key: str = "embedding"):
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+            raise ValueError(f"k={k!r}; expected an integer >= 1 (the offset of s_(t-k)).")
+        super().__init__(in_keys=[in_key],
+                         out_keys=[INITIAL_EMBEDDING_KEY, PREVIOUS_EMBEDDING_KEY])
+        self.k = k
+        self.in_key = in_key
+        self._ring: Tensor | None = None  # [*batch, k + 1, D]: s_{t-k} .. s_t
+        self._initial: Tensor | None = None  # [*batch, D]
+        self._cursor = 0  # ring slot of the newest embedding s_t
+
+    def _write(self, tensordict: TensorDictBase) -> TensorDictBase:
+        # Clones: the ring is updated in place, and the outputs must not change with it.
+        oldest = self._ring[..., (self._cursor + 1) % (self.k + 1), :]
+        tensordict.set(INITIAL_EMBEDDING_KEY, self._initial.clone())
+        tensordict.set(PREVIOUS_EMBEDDING_KEY, oldest.clone())
+        return tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase
+               ) -> TensorDictBase:
+        embedding = tensordict_reset.get(self.in_key, None)
+        if embedding is None:
+            raise KeyError(f"EmbeddingHistoryTransform: {self.in_key!r} is missing at reset; put "
+                           "the embedding transform before the history transform.")
+        reset = tensordict.get("_reset", None) if tensordict is not None else None
+        ring_shape = (*embedding.shape[:-1], self.k + 1, embedding.shape[-1])
+        if (reset is None or self._ring is None or self._ring.shape != ring_shape
+                or self._ring.device != embedding.device):
+            self._ring = embedding.unsqueeze(-2).expand(ring_shape).clone()
+            self._initial = embedding.clone()
+        else:
+            # "_reset" is shaped like "done" ([*batch, 1]); one flag per batch element.
+            mask = reset.reshape(*embedding.shape[:-1], -1).any(-1)
+            self._ring = torch.where(mask[..., None, None], embedding.unsqueeze(-2), self._ring)
+            self._initial = torch.where(mask[..., None], embedding, self._initial)
+        return self._write(tensordict_reset)
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase
+              ) -> TensorDictBase:
+        if self._ring is None:
+            raise RuntimeError("EmbeddingHistoryTransform: step before reset; call env.reset() "
+                               "first.")
+        self._cursor = (self._cursor + 1) % (self.k + 1)
+        self._ring[..., self._cursor, :] = next_tensordict.get(self.in_key)
+        return self._write(next_tensordict)
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        raise RuntimeError(
+            "EmbeddingHistoryTransform is stateful and only runs inside an environment. Sampled "
+            "batches already carry 'initial_embedding' and 'previous_embedding' as collected; "
+            "relabel them with TemporalRewardTransform alone.")
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        if self.in_key not in observation_spec.keys(True):
+            raise KeyError(f"EmbeddingHistoryTransform: no {self.in_key!r} in the observation "
+                           "spec; put the embedding transform before the history transform.")
+        embedding_spec = observation_spec[self.in_key]
+        observation_spec[INITIAL_EMBEDDING_KEY] = embedding_spec.clone()
+        observation_spec[PREVIOUS_EMBEDDING_KEY] = embedding_spec.clone()
+        return observation_spec
+
+    def extra_repr(self) -> str:
+        return f"k={self.k}, in_key={self.in_key!r}"

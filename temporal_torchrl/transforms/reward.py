@@ -1,0 +1,89 @@
+"""The temporal reward as a TorchRL transform, in the env and on sampled batches."""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.data import Composite, Unbounded
+from torchrl.envs.transforms import Transform
+
+from temporal_torchrl.rewards.temporal import REWARD_KEYS, TemporalReward
+
+INPUT_KEYS = ("embedding", "initial_embedding", "previous_embedding", "success")
+
+
+class TemporalRewardTransform(Transform):
+    """Overwrites ``"reward"`` with r = r_task + rho (r_P + lambda r_D) (thesis 4.1).
+
+    Reads ``"embedding"`` (s_{t+1}), ``"initial_embedding"``, ``"previous_embedding"`` and
+    ``"success"`` of the *next* state and writes ``"task_reward"``, ``"positional_reward"``,
+    ``"directional_reward"``, ``"vlm_reward"`` and ``"reward"`` (all float32 ``[..., 1]``), with
+    the heads as they are now and without gradient. The extra keys are declared as reward
+    entries, so the env has several reward keys: name ``"reward"`` explicitly where TorchRL asks
+    for one (``env.reward_key`` raises with several).
+
+    The same class serves two places:
+
+    - in a :class:`~torchrl.envs.TransformedEnv`, after the embedding and history transforms,
+      for the values seen during collection (logging);
+    - on a sampled batch (``transform(batch)``, or as a replay buffer transform), where it
+      relabels ``("next", ...)`` with the current heads: the rewards are a pure function of the
+      stored embeddings and success, so they can always be recomputed. A tensordict without a
+      ``"next"`` entry is relabelled at its root.
+
+    The transform holds the :class:`TemporalReward` (``.reward``) as a submodule; in a batched
+    env put it on the outer env so the workers do not run stale copies of the heads.
+
+    Example:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from temporal_torchrl.rewards import TemporalReward
+        >>> D = 8
+        >>> transform = TemporalRewardTransform(
+        ...     TemporalReward(D, torch.randn(D), torch.randn(D), directional="d3"))
+        >>> s = torch.randn(4, D)
+        >>> batch = TensorDict({"next": {"embedding": s, "initial_embedding": s,
+        ...     "previous_embedding": s, "success": torch.zeros(4, 1, dtype=torch.bool)}}, [4])
+        >>> transform(batch)["next", "reward"].shape
+        torch.Size([4, 1])
+    """
+
+    def __init__(self, reward: TemporalReward):
+        if not isinstance(reward, TemporalReward):
+            raise ValueError(f"reward={type(reward).__name__}; expected a TemporalReward.")
+        super().__init__(in_keys=list(INPUT_KEYS), out_keys=list(REWARD_KEYS))
+        self.reward = reward
+
+    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        inputs = [next_tensordict.get(key, None) for key in INPUT_KEYS]
+        missing = [key for key, value in zip(INPUT_KEYS, inputs, strict=True) if value is None]
+        if missing:
+            raise KeyError(
+                f"TemporalRewardTransform: missing {missing} (needs {list(INPUT_KEYS)}). In an env "
+                "put EmbeddingTransform and EmbeddingHistoryTransform before it; a stored batch "
+                "must keep those keys under 'next'.")
+        with torch.no_grad():
+            rewards = self.reward(*inputs)
+        for key, value in rewards.items():
+            next_tensordict.set(key, value)
+        return next_tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase
+               ) -> TensorDictBase:
+        # Rewards belong to transitions; a reset produces none.
+        return tensordict_reset
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        next_tensordict = tensordict.get("next", None)
+        self._call(tensordict if next_tensordict is None else next_tensordict)
+        return tensordict
+
+    def transform_reward_spec(self, reward_spec: Composite) -> Composite:
+        reward = reward_spec["reward"]
+        for key in REWARD_KEYS:
+            reward_spec[key] = Unbounded(shape=reward.shape, dtype=torch.float32,
+                                         device=reward.device)
+        return reward_spec
+
+    def extra_repr(self) -> str:
+        return f"reward={self.reward.extra_repr()}"

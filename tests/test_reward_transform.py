@@ -1,0 +1,132 @@
+"""TemporalRewardTransform: the env path and the replay (relabelling) path agree."""
+
+import pytest
+import torch
+from rewards_mock_env import EmbeddingMockEnv
+from tensordict import TensorDict
+from torchrl.data import LazyTensorStorage, ReplayBuffer
+from torchrl.envs import Compose, TransformedEnv
+from torchrl.envs.utils import check_env_specs
+
+from temporal_torchrl.rewards import REWARD_KEYS, TemporalReward
+from temporal_torchrl.transforms import EmbeddingHistoryTransform, TemporalRewardTransform
+
+D = 6
+
+
+def _reward(**kwargs):
+    gen = torch.Generator().manual_seed(5)
+    defaults = {"positional": "furl", "directional": "d3", "rho": 1.0, "lambda_": 4.0, "k": 2}
+    return TemporalReward(D, torch.randn(D, generator=gen), torch.randn(D, generator=gen),
+                          **{**defaults, **kwargs})
+
+
+def _env(reward, episode_lengths=(3, 5, 8)):
+    return TransformedEnv(EmbeddingMockEnv(D, episode_lengths),
+                          Compose(EmbeddingHistoryTransform(reward.k),
+                                  TemporalRewardTransform(reward)))
+
+
+@pytest.mark.parametrize("episode_lengths", [(6,), (3, 5, 8)])
+def test_specs_check(episode_lengths):
+    env = _env(_reward(), episode_lengths)
+    check_env_specs(env)
+    assert set(REWARD_KEYS) <= set(env.reward_keys)
+
+
+@pytest.mark.parametrize(("positional", "directional"),
+                         [("furl", "d3"), ("p1", "d4"), ("p3", "d5"), (None, "d2"), ("liv", None)])
+def test_env_reward_equals_relabelled_stored_batch(positional, directional):
+    reward = _reward(positional=positional, directional=directional)
+    rollout = _env(reward).rollout(12, break_when_any_done=False)
+    collected = {key: rollout["next", key].clone() for key in REWARD_KEYS}
+    stored = rollout.exclude(*[("next", key) for key in REWARD_KEYS])
+    relabelled = TemporalRewardTransform(reward)(stored)
+    for key in REWARD_KEYS:
+        torch.testing.assert_close(relabelled["next", key], collected[key])
+    # The env's sparse reward was overwritten: r_task + rho * vlm, not success - 1.
+    success = rollout["next", "success"].float()
+    torch.testing.assert_close(collected["task_reward"], success - 1)
+    torch.testing.assert_close(collected["reward"],
+                               success - 1 + reward.rho * collected["vlm_reward"])
+    assert not torch.equal(collected["reward"], success - 1)
+
+
+def test_relabelling_uses_the_heads_as_they_are_now():
+    reward = _reward()
+    transform = TemporalRewardTransform(reward)
+    rollout = _env(reward).rollout(10, break_when_any_done=False)
+    before = rollout["next", "reward"].clone()
+    with torch.no_grad():
+        for parameter in reward.directional_heads.parameters():
+            parameter.add_(0.5 * torch.randn_like(parameter))
+    after = transform(rollout.clone())["next", "reward"]
+    assert not torch.allclose(after, before)
+    nxt = rollout["next"]
+    expected = reward(nxt["embedding"], nxt["initial_embedding"], nxt["previous_embedding"],
+                      nxt["success"])["reward"]
+    torch.testing.assert_close(after, expected)
+    assert not after.requires_grad
+
+
+def test_replay_buffer_transform_relabels_sampled_transitions():
+    reward = _reward()
+    rollout = _env(reward).rollout(10, break_when_any_done=False).reshape(-1)
+    buffer = ReplayBuffer(storage=LazyTensorStorage(100), batch_size=8,
+                          transform=TemporalRewardTransform(reward))
+    buffer.extend(rollout.exclude(("next", "reward")))
+    batch = buffer.sample()
+    nxt = batch["next"]
+    expected = reward(nxt["embedding"], nxt["initial_embedding"], nxt["previous_embedding"],
+                      nxt["success"])["reward"]
+    torch.testing.assert_close(nxt["reward"], expected)
+
+
+def test_flat_tensordict_is_relabelled_at_the_root():
+    reward = _reward()
+    s = torch.randn(3, D)
+    flat = TensorDict({"embedding": s, "initial_embedding": s, "previous_embedding": s,
+                       "success": torch.ones(3, 1, dtype=torch.bool)}, [3])
+    out = TemporalRewardTransform(reward)(flat)
+    assert torch.equal(out["task_reward"], torch.zeros(3, 1))
+
+
+def test_rejects_something_else_than_a_temporal_reward():
+    with pytest.raises(ValueError, match="expected a TemporalReward"):
+        TemporalRewardTransform(torch.nn.Identity())
+
+
+def test_missing_history_is_explained():
+    s = torch.randn(3, D)
+    flat = TensorDict({"embedding": s, "success": torch.ones(3, 1, dtype=torch.bool)}, [3])
+    with pytest.raises(KeyError, match="initial_embedding.*EmbeddingHistoryTransform"):
+        TemporalRewardTransform(_reward())(flat)
+
+
+def test_mismatching_embedding_size_in_the_env_is_explained():
+    reward = TemporalReward(D + 2, torch.randn(D + 2), torch.randn(D + 2), directional="d3")
+    env = _env(reward)
+    env.reset()
+    with pytest.raises(ValueError, match=f"size {D}.*embedding_dim={D + 2}"):
+        env.rand_step()
+
+
+def test_real_env_and_state_encoder_pass_check_env_specs():
+    envs = pytest.importorskip("temporal_torchrl.envs")
+    encoders = pytest.importorskip("temporal_torchrl.encoders")
+    try:
+        from temporal_torchrl.transforms import EmbeddingTransform
+        make_env, load_encoder = envs.make_env, encoders.load_encoder
+    except (ImportError, AttributeError) as error:
+        pytest.skip(f"envs/encoders not available yet: {error}")
+    encoder = load_encoder("state")
+    gen = torch.Generator().manual_seed(0)
+    reward = TemporalReward(encoder.dim, torch.randn(encoder.dim, generator=gen),
+                            torch.randn(encoder.dim, generator=gen), directional="d3", k=3)
+    env = TransformedEnv(make_env("drawer-open", max_episode_steps=12),
+                         Compose(EmbeddingTransform(encoder), EmbeddingHistoryTransform(reward.k),
+                                 TemporalRewardTransform(reward)))
+    check_env_specs(env)
+    rollout = env.rollout(15, break_when_any_done=False)
+    relabelled = TemporalRewardTransform(reward)(rollout.clone())
+    torch.testing.assert_close(relabelled["next", "reward"], rollout["next", "reward"])

@@ -1,0 +1,297 @@
+"""Reward functions against hand computations of their thesis equations (numpy, float64)."""
+
+import numpy as np
+import pytest
+import torch
+
+from temporal_torchrl.rewards import (
+    DIRECTIONAL,
+    POSITIONAL,
+    RewardHeads,
+    TemporalReward,
+    heads_input_dims,
+)
+
+D, HIDDEN, OUT, BATCH, ALPHA = 5, 7, 3, 4, 0.4
+
+
+def make_heads(variant, seed=0):
+    torch.manual_seed(seed)
+    image_dim, text_dim = heads_input_dims(variant, D)
+    return RewardHeads(image_dim, text_dim, hidden_dim=HIDDEN, out_dim=OUT)
+
+
+def mlp(head, x):
+    """f(x) = W2 relu(W1 x + b1) + b2 with the head's weights, one vector at a time."""
+    w1, b1 = head[0].weight.detach().double().numpy(), head[0].bias.detach().double().numpy()
+    w2, b2 = head[2].weight.detach().double().numpy(), head[2].bias.detach().double().numpy()
+    return w2 @ np.maximum(w1 @ x + b1, 0.0) + b2
+
+
+def csim(x, y):
+    return float(x @ y / (np.linalg.norm(x) * np.linalg.norm(y)))
+
+
+def unit(x):
+    return x / np.linalg.norm(x)
+
+
+def regularise(x, g, b, alpha, projection):
+    """alpha proj_L x + (1 - alpha) x on unit x, g, b."""
+    x, g, b = unit(x), unit(g), unit(b)
+    d = g - b
+    if projection == "origin":
+        proj = (x @ d) / (d @ d) * d
+    else:
+        proj = b + ((x - b) @ d) / (d @ d) * d
+    return alpha * proj + (1 - alpha) * x
+
+
+def reference(variant, heads, s, s0, s_prev, g, b, alpha, projection="origin", position=None):
+    """The thesis equation of ``variant`` for one row."""
+    fi = (lambda x: mlp(heads.image, x)) if heads is not None else None
+    fl = (lambda x: mlp(heads.text, x)) if heads is not None else None
+    p = s if position is None else position
+    if variant == "liv":
+        return csim(s, g)
+    if variant == "furl":
+        return csim(fi(s), fl(g))
+    if variant == "p1":
+        return csim(fi(s - s0), fl(g - b))
+    if variant == "p2":
+        return csim(fi(s) - fi(s0), fl(g) - fl(b))
+    if variant == "p3":
+        u, vg, vb = unit(fi(s)), unit(fl(g)), unit(fl(b))
+        return 1 - 0.5 * np.sum((regularise(u, vg, vb, alpha, projection) - vg) ** 2)
+    if variant == "p4":
+        x = regularise(s, g, b, alpha, projection)
+        return 1 - 0.5 * np.sum((unit(fi(x)) - unit(fl(g))) ** 2)
+    if variant == "d1":
+        return csim(fi(unit(s - s_prev)), fl(g - b))
+    if variant == "d2":
+        return csim(fi(s) - fi(s_prev), fl(g) - fl(b))
+    position_part = {"d3": p, "d4": p - s0,
+                     "d5": regularise(p, g, b, alpha, projection)}[variant]
+    return csim(fi(np.concatenate([unit(position_part), unit(s - s_prev)])), fl(g - b))
+
+
+@pytest.fixture
+def embeddings():
+    gen = torch.Generator().manual_seed(1)
+    s, s0, s_prev, position = (torch.randn(BATCH, D, generator=gen) for _ in range(4))
+    g, b = torch.randn(D, generator=gen), torch.randn(D, generator=gen)
+    return s, s0, s_prev, position, g, b
+
+
+def _call(variant, heads, s, s0, s_prev, g, b, **kwargs):
+    fn = {**POSITIONAL, **DIRECTIONAL}[variant]
+    return fn(heads, s, s0=s0, s_prev=s_prev, g=g, b=b, alpha=ALPHA, **kwargs)
+
+
+ALL_VARIANTS = [*POSITIONAL, *DIRECTIONAL]
+
+
+@pytest.mark.parametrize("projection", ["origin", "line"])
+@pytest.mark.parametrize("variant", ALL_VARIANTS)
+def test_matches_hand_computation(variant, projection, embeddings):
+    s, s0, s_prev, _, g, b = embeddings
+    heads = None if variant == "liv" else make_heads(variant)
+    got = _call(variant, heads, s, s0, s_prev, g, b, projection=projection)
+    assert got.shape == (BATCH,)
+    n = lambda t: t.double().numpy()  # noqa: E731
+    expected = [reference(variant, heads, n(s[i]), n(s0[i]), n(s_prev[i]), n(g), n(b), ALPHA,
+                          projection) for i in range(BATCH)]
+    np.testing.assert_allclose(got.detach().numpy(), expected, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("variant", ["d3", "d4", "d5"])
+def test_position_keyword_scores_a_direction_at_a_fixed_position(variant, embeddings):
+    s, s0, s_prev, position, g, b = embeddings
+    heads = make_heads(variant)
+    got = _call(variant, heads, s, s0, s_prev, g, b, position=position)
+    n = lambda t: t.double().numpy()  # noqa: E731
+    expected = [reference(variant, heads, n(s[i]), n(s0[i]), n(s_prev[i]), n(g), n(b), ALPHA,
+                          position=n(position[i])) for i in range(BATCH)]
+    np.testing.assert_allclose(got.detach().numpy(), expected, rtol=1e-5, atol=1e-6)
+    # A single position vector broadcasts over a batch of directions.
+    single = _call(variant, heads, s, s0, s_prev, g, b, position=position[0])
+    assert single.shape == (BATCH,)
+    torch.testing.assert_close(single[0], got[0])
+
+
+def test_line_projection_equals_vlm_rms_quadratic_form(embeddings):
+    """VLM-RMs: r = 1 - 1/2 ||(x - g) P||^2, P = alpha d d^T/||d||^2 + (1 - alpha) I."""
+    s, _, _, _, g, b = embeddings
+    heads = make_heads("p3")
+    got = _call("p3", heads, s, None, None, g, b, projection="line")
+    vg = unit(mlp(heads.text, g.double().numpy()))
+    vb = unit(mlp(heads.text, b.double().numpy()))
+    d = (vg - vb)[:, None]
+    proj = ALPHA * (d @ d.T) / (d.T @ d) + (1 - ALPHA) * np.eye(OUT)
+    for i in range(BATCH):
+        u = unit(mlp(heads.image, s[i].double().numpy()))
+        expected = 1 - 0.5 * np.sum(((u - vg) @ proj) ** 2)
+        assert got[i].item() == pytest.approx(expected, rel=1e-5, abs=1e-6)
+
+
+def test_identity_heads_turn_furl_into_zero_shot_csim():
+    heads = RewardHeads(3, 3, hidden_dim=3, out_dim=3)
+    with torch.no_grad():
+        for head in (heads.image, heads.text):
+            head[0].weight.copy_(torch.eye(3)), head[2].weight.copy_(torch.eye(3))
+            head[0].bias.zero_(), head[2].bias.zero_()
+    s, g = torch.tensor([[1.0, 2.0, 0.5], [3.0, 0.1, 1.0]]), torch.tensor([2.0, 1.0, 1.0])
+    torch.testing.assert_close(POSITIONAL["furl"](heads, s, g=g), POSITIONAL["liv"](None, s, g=g))
+    # Hand value: (1*2 + 2*1 + 0.5*1) / (sqrt(5.25) sqrt(6)).
+    assert POSITIONAL["liv"](None, s, g=g)[0].item() == pytest.approx(4.5 / (5.25 * 6) ** 0.5)
+
+
+def test_alpha_zero_reduces_p3_to_furl_and_p4_to_csim(embeddings):
+    s, _, _, _, g, b = embeddings
+    heads = make_heads("p3")
+    p3 = POSITIONAL["p3"](heads, s, g=g, b=b, alpha=0.0)
+    torch.testing.assert_close(p3, POSITIONAL["furl"](heads, s, g=g))
+    p4 = POSITIONAL["p4"](heads, s, g=g, b=b, alpha=0.0)
+    unit_s = s / s.norm(dim=-1, keepdim=True)
+    torch.testing.assert_close(p4, POSITIONAL["furl"](heads, unit_s, g=g))
+
+
+@pytest.mark.parametrize("variant", ["d1", "d3", "d4", "d5"])
+def test_direction_magnitude_does_not_matter(variant, embeddings):
+    # float64: s - (s - 1e-3 Δ) loses digits of Δ in float32.
+    s, s0, s_prev, _, g, b = (t.double() for t in embeddings)
+    heads = make_heads(variant).double()
+    base = _call(variant, heads, s, s0, s_prev, g, b)
+    for scale in (1e-3, 7.0):
+        # Same position s, direction (s - s_prev) scaled: s - s_prev' = scale (s - s_prev).
+        scaled_prev = s - scale * (s - s_prev)
+        torch.testing.assert_close(_call(variant, heads, s, s0, scaled_prev, g, b,
+                                         position=s), base)
+    flipped = _call(variant, heads, s, s0, s + (s - s_prev), g, b, position=s)
+    assert not torch.allclose(flipped, base), "the opposite direction should score differently"
+
+
+def test_d3_position_magnitude_does_not_matter(embeddings):
+    s, s0, s_prev, position, g, b = embeddings
+    heads = make_heads("d3")
+    base = _call("d3", heads, s, s0, s_prev, g, b, position=position)
+    torch.testing.assert_close(_call("d3", heads, s, s0, s_prev, g, b, position=3 * position),
+                               base)
+
+
+@pytest.mark.parametrize("variant", ALL_VARIANTS)
+def test_zero_direction_and_t0_give_finite_rewards(variant, embeddings):
+    s, _, _, _, g, b = embeddings
+    heads = None if variant == "liv" else make_heads(variant)
+    # Episode start: s_t = s_0 = s_{t-k}.
+    reward = _call(variant, heads, s, s, s, g, b)
+    assert torch.isfinite(reward).all()
+    if variant in ("d2", "p2"):
+        assert torch.equal(reward, torch.zeros(BATCH))
+
+
+@pytest.mark.parametrize("variant", [v for v in ALL_VARIANTS if v != "liv"])
+def test_gradients_reach_both_heads_and_shapes_follow_the_batch(variant):
+    heads = make_heads(variant)
+    s, s0, s_prev = (torch.randn(2, 3, D) for _ in range(3))
+    reward = _call(variant, heads, s, s0, s_prev, torch.randn(D), torch.randn(D))
+    assert reward.shape == (2, 3)
+    reward.sum().backward()
+    assert heads.image[0].weight.grad.abs().sum() > 0
+    assert heads.text[0].weight.grad.abs().sum() > 0
+
+
+def test_missing_argument_is_named():
+    with pytest.raises(ValueError, match="needs s0"):
+        POSITIONAL["p1"](make_heads("p1"), torch.randn(D), g=torch.randn(D), b=torch.randn(D))
+    with pytest.raises(ValueError, match="projection='middle'"):
+        POSITIONAL["p4"](make_heads("p4"), torch.randn(D), g=torch.randn(D), b=torch.randn(D),
+                         projection="middle")
+
+
+def test_heads_input_dims():
+    assert heads_input_dims("furl", 1024) == (1024, 1024)
+    assert heads_input_dims("d1", 1024) == (1024, 1024)
+    for variant in ("d3", "d4", "d5"):
+        assert heads_input_dims(variant, 1024) == (2048, 1024)
+    with pytest.raises(ValueError, match="zero-shot"):
+        heads_input_dims("liv", 8)
+    with pytest.raises(ValueError, match="'d9'.*furl"):
+        heads_input_dims("d9", 8)
+    heads = RewardHeads(*heads_input_dims("d3", 8))
+    assert heads.image[0].in_features == 16 and heads.image[2].out_features == 64
+    assert heads.text[0].out_features == 256
+
+
+# --- TemporalReward -----------------------------------------------------------------------------
+
+def _temporal(**kwargs):
+    gen = torch.Generator().manual_seed(3)
+    return TemporalReward(D, torch.randn(D, generator=gen), torch.randn(D, generator=gen),
+                          **kwargs)
+
+
+def test_combined_reward_is_task_plus_rho_times_vlm(embeddings):
+    s, s0, s_prev, _, _, _ = embeddings
+    reward = _temporal(positional="p2", directional="d4", rho=0.5, lambda_=4.0, alpha=0.3)
+    success = torch.tensor([[True], [False], [False], [True]])
+    out = reward(s, s0, s_prev, success)
+    g, b = reward.goal_embedding, reward.baseline_embedding
+    r_p = POSITIONAL["p2"](reward.positional_heads, s, s0=s0, g=g, b=b)
+    r_d = DIRECTIONAL["d4"](reward.directional_heads, s, s0=s0, s_prev=s_prev, g=g, b=b)
+    assert out["task_reward"].squeeze(-1).tolist() == [0.0, -1.0, -1.0, 0.0]
+    torch.testing.assert_close(out["positional_reward"].squeeze(-1), r_p)
+    torch.testing.assert_close(out["directional_reward"].squeeze(-1), r_d)
+    torch.testing.assert_close(out["vlm_reward"].squeeze(-1), r_p + 4.0 * r_d)
+    torch.testing.assert_close(out["reward"].squeeze(-1),
+                               success.squeeze(-1).float() - 1 + 0.5 * (r_p + 4.0 * r_d))
+    assert all(v.shape == (BATCH, 1) and v.dtype == torch.float32 for v in out.values())
+
+
+def test_absent_parts_are_zero_and_have_no_heads(embeddings):
+    s, s0, s_prev, _, _, _ = embeddings
+    success = torch.zeros(BATCH, 1, dtype=torch.bool)
+    only_directional = _temporal(positional=None, directional="d1")
+    assert only_directional.positional_heads is None
+    out = only_directional(s, s0, s_prev, success)
+    assert torch.equal(out["positional_reward"], torch.zeros(BATCH, 1))
+    zero_shot = _temporal(positional="liv")
+    assert zero_shot.positional_heads is None and zero_shot.directional_heads is None
+    out = zero_shot(s, s0, s_prev, success)
+    assert torch.equal(out["directional_reward"], torch.zeros(BATCH, 1))
+    torch.testing.assert_close(out["positional_reward"].squeeze(-1),
+                               torch.cosine_similarity(s, zero_shot.goal_embedding, dim=-1))
+
+
+def test_projection_option_reaches_the_functions(embeddings):
+    s, s0, s_prev, _, _, _ = embeddings
+    success = torch.zeros(BATCH, 1, dtype=torch.bool)
+    origin = _temporal(positional="p4", projection="origin")
+    line = _temporal(positional="p4", projection="line")
+    line.load_state_dict(origin.state_dict())
+    assert not torch.allclose(origin(s, s0, s_prev, success)["reward"],
+                              line(s, s0, s_prev, success)["reward"])
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"k": 0}, "k=0"),
+    ({"alpha": 1.5}, "alpha=1.5"),
+    ({"alpha": -0.1}, "alpha=-0.1"),
+    ({"rho": -1.0}, "rho=-1.0"),
+    ({"lambda_": -2.0}, "lambda_=-2.0"),
+    ({"positional": "p9"}, "'p9'.*furl, p1"),
+    ({"directional": "furl"}, "'furl'.*d1, d2"),
+    ({"projection": "middle"}, "projection='middle'"),
+])
+def test_configuration_errors(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        _temporal(**kwargs)
+
+
+def test_embedding_size_mismatch_names_both_sizes():
+    with pytest.raises(ValueError, match=r"shape \(7,\).*\(5,\)"):
+        TemporalReward(D, torch.randn(7), torch.randn(D))
+    reward = _temporal(directional="d3")
+    with pytest.raises(ValueError, match="size 9.*embedding_dim=5"):
+        reward(torch.randn(2, 9), torch.randn(2, 9), torch.randn(2, 9),
+               torch.zeros(2, 1, dtype=torch.bool))
