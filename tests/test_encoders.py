@@ -1,0 +1,223 @@
+"""Encoders: LIV's checkpoint format and loader, preprocessing, open_clip and state encoders."""
+
+import os
+import subprocess
+import sys
+
+import open_clip
+import pytest
+import torch
+
+from temporal_torchrl.encoders import (
+    ENCODERS,
+    ImagePreprocessor,
+    LIVEncoder,
+    OpenCLIPEncoder,
+    StateEncoder,
+    load_encoder,
+    make_preprocessor,
+    save_random_liv_checkpoint,
+)
+from temporal_torchrl.encoders.preprocessing import CLIP_MEAN, CLIP_STD
+
+PROMPTS = ["open the drawer", "robot arm beside table"]
+
+
+@pytest.fixture(scope="module")
+def liv_files(tmp_path_factory):
+    """A random-weight checkpoint in LIV's on-disk format, its source model, and the encoder."""
+    path = tmp_path_factory.mktemp("liv") / "model.pt"
+    source = save_random_liv_checkpoint(path, seed=1)
+    encoder = load_encoder("liv", checkpoint=path)
+    return path, source, encoder
+
+
+@pytest.fixture(scope="module")
+def frames():
+    generator = torch.Generator().manual_seed(0)
+    return torch.randint(0, 256, (2, 48, 64, 3), dtype=torch.uint8, generator=generator)
+
+
+def test_checkpoint_is_written_in_liv_format(liv_files):
+    path, _, _ = liv_files
+    checkpoint = torch.load(path, weights_only=True)
+    weights = checkpoint["liv"]
+    assert len(weights) == 489
+    assert all(key.startswith("module.model.") for key in weights)
+    assert weights["module.model.visual.conv1.weight"].dtype == torch.float16
+    assert weights["module.model.visual.attnpool.q_proj.weight"].dtype == torch.float16
+    assert weights["module.model.transformer.resblocks.0.attn.in_proj_weight"].dtype == (
+        torch.float16)
+    assert weights["module.model.text_projection"].dtype == torch.float16
+    assert weights["module.model.visual.bn1.running_var"].dtype == torch.float32
+    assert weights["module.model.token_embedding.weight"].dtype == torch.float32
+    assert weights["module.model.ln_final.weight"].dtype == torch.float32
+
+
+@pytest.mark.slow
+def test_liv_reproduces_source_image_and_text_embeddings(liv_files, frames):
+    _, source, encoder = liv_files
+    assert isinstance(encoder, LIVEncoder) and encoder.dim == 1024
+    images = encoder.preprocess_images(frames)
+    with torch.no_grad():
+        expected_images = source.encode_image(images)
+        expected_text = source.encode_text(open_clip.get_tokenizer("RN50-quickgelu")(PROMPTS))
+    embeddings = encoder.embed_images(frames)
+    assert embeddings.shape == (2, 1024) and embeddings.dtype == torch.float32
+    torch.testing.assert_close(embeddings, expected_images, rtol=1e-4, atol=1e-5)
+    text = encoder.embed_text(PROMPTS)
+    torch.testing.assert_close(text, expected_text, rtol=1e-4, atol=1e-5)
+    # Not normalised (LIV compares with cosine similarity itself).
+    assert not torch.allclose(text.norm(dim=-1), torch.ones(2))
+    assert not torch.allclose(text[0], text[1])
+
+
+def test_liv_is_frozen_float32_and_stays_in_eval(liv_files):
+    _, _, encoder = liv_files
+    assert all(not p.requires_grad for p in encoder.parameters())
+    assert all(p.dtype == torch.float32 for p in encoder.parameters())
+    encoder.train()
+    assert not any(module.training for module in encoder.modules())
+
+
+def test_text_embeddings_are_cached_per_prompt(liv_files, monkeypatch):
+    _, _, encoder = liv_files
+    first = encoder.embed_text(["pick up the puck"])
+    calls = []
+    original = encoder._encode_text
+    monkeypatch.setattr(encoder, "_encode_text", lambda texts: calls.append(texts) or
+                        original(texts))
+    again = encoder.embed_text(["pick up the puck", "pick up the puck"])
+    assert calls == []
+    torch.testing.assert_close(again, first.expand(2, -1))
+    encoder.embed_text(["pick up the puck", "push the button"])
+    assert calls == [["push the button"]]
+    with pytest.raises(ValueError, match="list of strings"):
+        encoder.embed_text("a bare string")
+
+
+@pytest.mark.slow
+def test_bad_checkpoint_is_refused_by_name_and_nothing_is_half_loaded(liv_files, tmp_path):
+    path, _, encoder = liv_files
+    weights = torch.load(path, weights_only=True)["liv"]
+    del weights["module.model.visual.layer4.2.bn3.running_mean"]
+    weights["module.model.visual.extra_head.weight"] = torch.zeros(3)
+    weights["module.model.text_projection"] = torch.zeros(512, 512, dtype=torch.float16)
+    bad = tmp_path / "bad.pt"
+    torch.save({"liv": weights}, bad)
+    model = encoder.model
+    conv = model.visual.conv1.weight.clone()
+    with pytest.raises(ValueError) as error:
+        encoder.load_checkpoint(bad)
+    message = str(error.value)
+    assert "missing keys: visual.layer4.2.bn3.running_mean" in message
+    assert "unexpected keys: visual.extra_head.weight" in message
+    assert "text_projection (checkpoint (512, 512), model (512, 1024))" in message
+    assert encoder.checkpoint_path == path and encoder.model is model
+    torch.testing.assert_close(model.visual.conv1.weight, conv, rtol=0, atol=0)
+
+
+def test_files_that_are_not_liv_checkpoints_are_refused(tmp_path):
+    plain = tmp_path / "plain.pt"
+    torch.save({"state_dict": {"w": torch.zeros(1)}}, plain)
+    with pytest.raises(ValueError, match="'liv' entry"):
+        load_encoder("liv", checkpoint=plain)
+    with pytest.raises(FileNotFoundError, match="not a file"):
+        load_encoder("liv", checkpoint=tmp_path / "absent.pt")
+
+
+@pytest.mark.slow
+def test_hub_download_fails_cleanly_offline(tmp_path):
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path)}
+    env.pop("HF_HUB_CACHE", None)
+    code = (
+        "from temporal_torchrl.encoders import load_encoder\n"
+        "try:\n    load_encoder('liv')\n"
+        "except FileNotFoundError as error:\n    print(error)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    message = result.stdout
+    assert "'model.pt'" in message and "'jasonyma/LIV'" in message
+    assert "checkpoint='/path/to/model.pt'" in message
+    assert not list(tmp_path.rglob("*.pt"))
+
+
+def _normalise(channels):
+    mean = torch.tensor(CLIP_MEAN).view(3, 1, 1)
+    std = torch.tensor(CLIP_STD).view(3, 1, 1)
+    return (channels - mean) / std
+
+
+def test_preprocessing_matches_a_hand_computation():
+    frame = torch.arange(4 * 4 * 3, dtype=torch.uint8).view(1, 4, 4, 3) * 5
+    image = frame[0].permute(2, 0, 1).float() / 255
+    # Bilinear, no antialias, exact 2x downscale: each output pixel is the mean of a 2x2 block.
+    blocks = image.unfold(1, 2, 2).unfold(2, 2, 2).mean(dim=(-1, -2))
+    torch.testing.assert_close(ImagePreprocessor(2)(frame)[0], _normalise(blocks))
+
+    wide = torch.arange(2 * 4 * 3, dtype=torch.uint8).view(1, 2, 4, 3)
+    # Shorter side already 2: no resize; center crop keeps columns 1 and 2.
+    expected = _normalise(wide[0, :, 1:3].permute(2, 0, 1).float() / 255)
+    torch.testing.assert_close(ImagePreprocessor(2)(wide)[0], expected)
+    bgr = ImagePreprocessor(2, channel_order="bgr")(wide)[0]
+    expected_bgr = (wide[0, :, 1:3].flip(-1).permute(2, 0, 1).float() / 255
+                    - torch.tensor(CLIP_MEAN).view(3, 1, 1)) / torch.tensor(CLIP_STD).view(3, 1, 1)
+    torch.testing.assert_close(bgr, expected_bgr)
+
+
+def test_preprocessing_shapes_presets_and_errors():
+    frames = torch.randint(0, 256, (3, 100, 150, 3), dtype=torch.uint8)
+    assert ImagePreprocessor()(frames).shape == (3, 3, 224, 224)
+    rendered = torch.randint(0, 256, (1, 256, 256, 3), dtype=torch.uint8)
+    prior = make_preprocessor("metaworld_prior")
+    torch.testing.assert_close(prior(rendered),
+                               ImagePreprocessor()(rendered[:, 32:224, 32:224].contiguous()))
+    with pytest.raises(ValueError, match="256"):
+        prior(frames)
+    with pytest.raises(ValueError, match="uint8"):
+        ImagePreprocessor()(frames.float())
+    with pytest.raises(ValueError, match="unknown preprocessing 'jpeg'"):
+        make_preprocessor("jpeg")
+
+
+def test_state_encoder_is_seeded_and_render_free():
+    encoder = load_encoder("state", dim=32)
+    assert (encoder.name, encoder.dim, encoder.input_key) == ("state", 32, "observation")
+    observations = torch.randn(5, 39)
+    embeddings = encoder.embed(observations)
+    assert embeddings.shape == (5, 32) and embeddings.dtype == torch.float32
+    torch.testing.assert_close(embeddings, StateEncoder(dim=32).embed(observations))
+    assert not torch.allclose(embeddings, StateEncoder(dim=32, seed=1).embed(observations))
+    text = encoder.embed_text(PROMPTS)
+    torch.testing.assert_close(text, StateEncoder(dim=32).embed_text(PROMPTS))
+    assert not torch.allclose(text[0], text[1])
+    assert StateEncoder().dim == 1024
+    with pytest.raises(NotImplementedError, match="not images"):
+        encoder.embed_images(torch.zeros(1, 8, 8, 3, dtype=torch.uint8))
+    with pytest.raises(ValueError, match=r"\[N, 39\]"):
+        encoder.embed(torch.zeros(5, 12))
+
+
+def test_load_encoder_refuses_unknown_names():
+    assert ENCODERS == ("liv", "open_clip", "state")
+    with pytest.raises(ValueError, match="unknown encoder 'vip'.*'liv', 'open_clip', 'state'"):
+        load_encoder("vip")
+    with pytest.raises(ValueError, match="no weights"):
+        load_encoder("state", checkpoint="model.pt")
+    with pytest.raises(ValueError, match="unknown open_clip model 'ViT-Q-99'"):
+        load_encoder("open_clip", model_name="ViT-Q-99")
+
+
+@pytest.mark.slow
+def test_open_clip_encoder_loads_a_local_file(liv_files, frames, tmp_path):
+    _, source, _ = liv_files
+    path = tmp_path / "rn50.pt"
+    torch.save(source.state_dict(), path)
+    encoder = load_encoder("open_clip", model_name="RN50-quickgelu", checkpoint=path,
+                           preprocessing="liv")
+    assert isinstance(encoder, OpenCLIPEncoder) and encoder.dim == 1024
+    with torch.no_grad():
+        expected = source.encode_image(encoder.preprocess_images(frames[:1]))
+    torch.testing.assert_close(encoder.embed_images(frames[:1]), expected, rtol=1e-4, atol=1e-5)
