@@ -28,7 +28,7 @@ from temporal_torchrl.encoders.open_clip_encoder import OpenCLIPEncoder
 from temporal_torchrl.encoders.preprocessing import ImagePreprocessor, make_preprocessor
 from temporal_torchrl.encoders.state import StateEncoder
 
-ENCODERS: tuple[str, ...] = ("liv", "open_clip", "state")
+ENCODERS: tuple[str, ...] = ("liv", "open_clip", "state", "metaworld_small")
 
 
 def load_encoder(name: str, *, checkpoint: str | os.PathLike | None = None,
@@ -55,6 +55,11 @@ def load_encoder(name: str, *, checkpoint: str | os.PathLike | None = None,
                 "pass seed=... to change its fixed random projection"
             )
         encoder = StateEncoder(**kwargs)
+    elif name == "metaworld_small":
+        # The package's own small encoder; ``checkpoint=None`` loads the shipped weights.
+        from temporal_torchrl.encoders.small import SmallEncoder
+
+        encoder = SmallEncoder.from_pretrained(checkpoint, **kwargs)
     else:
         raise ValueError(f"unknown encoder {name!r}; expected one of {ENCODERS}")
     return encoder.to(device)

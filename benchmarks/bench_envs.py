@@ -1,0 +1,128 @@
+"""Throughput of the envs module against raw references measured in the same run.
+
+Rows:
+- render (fast / default): frames/s of ``RenderTransform`` (its env-step path, rotation
+  included) vs a raw ``mujoco.Renderer`` with the same settings, both drawing the same state
+  of ``push`` from ``corner2`` at 224x224 (targets on 2 CPU cores: fast >= 100 frames/s and
+  within 10% of raw).
+- env step: steps/s of ``make_env(...).rollout`` without rendering (random actions, auto-reset)
+  vs the raw Metaworld/gymnasium env stepped in a Python loop with random actions (target:
+  >= 0.8x raw).
+- env step + fast render: the same with ``render=True`` vs raw step + raw render, timed with
+  ``rollout`` (which stacks all frames at the end) and with a ``step_and_maybe_reset`` loop.
+
+Run: ``python benchmarks/bench_envs.py [--quick] [--json out.json]``.
+"""
+
+from __future__ import annotations
+
+import temporal_torchrl  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
+
+# isort: split
+import mujoco
+import numpy as np
+from _common import parse_args, rate, report
+from metaworld.env_dict import ALL_V3_ENVIRONMENTS_GOAL_HIDDEN
+
+from temporal_torchrl.envs import make_env
+
+TASK = "push"
+CAMERA = "corner2"
+SIZE = 224
+
+
+def compare(project_fn, raw_fn, items_per_call: int, seconds: float, rounds: int = 3
+            ) -> tuple[float, float]:
+    """Best rate of each over ``rounds`` alternating timings (the machine is shared and noisy;
+    alternating and keeping the best of each makes the ratio fair to both)."""
+    project, raw = 0.0, 0.0
+    for _ in range(rounds):
+        project = max(project, rate(project_fn, items_per_call, seconds / rounds))
+        raw = max(raw, rate(raw_fn, items_per_call, seconds / rounds))
+    return project, raw
+
+
+def raw_renderer(model: mujoco.MjModel, fast: bool) -> mujoco.Renderer:
+    """A plain ``mujoco.Renderer`` with the fast settings applied as the transform does."""
+    if fast:
+        model.vis.quality.shadowsize = 0
+        model.vis.quality.offsamples = 0
+    renderer = mujoco.Renderer(model, height=SIZE, width=SIZE)
+    if fast:
+        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+    return renderer
+
+
+def bench_render(fast: bool, seconds: float) -> dict:
+    env = make_env(TASK, render=True, image_size=SIZE, camera=CAMERA, fast_render=fast)
+    tensordict = env.reset()
+    transform = env.transform
+    raw_env = ALL_V3_ENVIRONMENTS_GOAL_HIDDEN[f"{TASK}-v3-goal-hidden"](seed=0)
+    raw_env.reset()
+    renderer = raw_renderer(raw_env.model, fast)
+
+    def raw_frame() -> np.ndarray:
+        renderer.update_scene(raw_env.data, CAMERA)
+        return renderer.render()
+
+    project, raw = compare(lambda: transform._call(tensordict), raw_frame, 1, seconds)
+    renderer.close()
+    env.close()
+    mode = "fast" if fast else "default"
+    return {"benchmark": f"render {mode} {SIZE}x{SIZE} (frames/s)", "project": project,
+            "raw": raw, "ratio": project / raw}
+
+
+def raw_stepper(render: bool, steps: int):
+    env = ALL_V3_ENVIRONMENTS_GOAL_HIDDEN[f"{TASK}-v3-goal-hidden"](seed=0)
+    env.reset()
+    renderer = raw_renderer(env.model, fast=True) if render else None
+
+    def run() -> None:
+        for _ in range(steps):
+            _, _, _, truncated, _ = env.step(env.action_space.sample())
+            if renderer is not None:
+                renderer.update_scene(env.data, CAMERA)
+                renderer.render()
+            if truncated:
+                env.reset()
+
+    return run
+
+
+def bench_steps(render: bool, steps: int, seconds: float, stack: bool = True) -> dict:
+    """``stack=False`` times ``step_and_maybe_reset`` in a loop (what a collector does per
+    step) instead of ``rollout``, whose final ``torch.stack`` of all frames is TorchRL's cost,
+    not the env's."""
+    env = make_env(TASK, render=render, image_size=SIZE, camera=CAMERA)
+
+    def step_loop() -> None:
+        tensordict = env.reset()
+        for _ in range(steps):
+            _, tensordict = env.step_and_maybe_reset(env.rand_action(tensordict))
+
+    project_fn = (lambda: env.rollout(steps, break_when_any_done=False)) if stack else step_loop
+    project, raw = compare(project_fn, raw_stepper(render, steps), steps, seconds)
+    env.close()
+    label = "env step + fast render" if render else "env step, no rendering"
+    how = "rollout" if stack else "step loop"
+    return {"benchmark": f"{label}, {how} (steps/s)", "project": project, "raw": raw,
+            "ratio": project / raw}
+
+
+def main() -> None:
+    args = parse_args(__doc__.splitlines()[0])
+    seconds = 1.5 if args.quick else 4.0
+    rows = [
+        bench_render(fast=True, seconds=seconds),
+        bench_render(fast=False, seconds=seconds),
+        bench_steps(render=False, steps=500, seconds=seconds),
+        bench_steps(render=True, steps=100 if args.quick else 250, seconds=seconds),
+        bench_steps(render=True, steps=100 if args.quick else 250, seconds=seconds, stack=False),
+    ]
+    report(f"envs: {TASK}, camera {CAMERA}", rows, args.json)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,326 @@
+"""Factories and bookkeeping for ``sac_temporal.py`` (in the style of TorchRL's sota recipes)."""
+
+from __future__ import annotations
+
+# torchrl imports mujoco: the package must choose the GL backend first.
+import temporal_torchrl  # noqa: F401  (headless GL backend before anything loads mujoco)
+
+# isort: split
+
+import csv
+import json
+import random
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
+from tensordict.nn import TensorDictModule
+from tensordict.nn.distributions import NormalParamExtractor
+from torch import nn
+from torchrl.envs import EnvBase, TransformedEnv
+from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.objectives import SACLoss, SoftUpdate
+from torchrl.record.loggers import Logger
+from torchrl.record.loggers.csv import CSVLogger
+from torchrl.record.loggers.wandb import WandbLogger
+
+from temporal_torchrl.data import EpisodeReplayBuffer
+from temporal_torchrl.encoders import ENCODERS, Encoder, load_encoder
+from temporal_torchrl.envs import (
+    GENERIC_BASELINE,
+    TASKS,
+    collect_expert_episodes,
+    get_task,
+    make_env,
+)
+from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, TemporalReward
+from temporal_torchrl.transforms import (
+    EmbeddingHistoryTransform,
+    EmbeddingTransform,
+    TemporalRewardTransform,
+)
+
+EPISODE_COLUMNS = ("episode", "env_steps", "success", "return", "mean_vlm_reward", "stage")
+LOGGER_BACKENDS = ("wandb", "csv", "none")
+CHECKPOINT = "checkpoint.pt"
+REPLAY_DIR = "replay"
+
+
+# --------------------------------------------------------------------------- configuration
+def _none(value: Any) -> str | None:
+    return None if value is None or str(value).lower() == "none" else str(value)
+
+
+def validate_config(cfg: DictConfig) -> None:
+    """Stop before any work on a bad value, naming the config key (ValueError)."""
+    def bad(key: str, value: Any, expected: str) -> ValueError:
+        return ValueError(f"config {key}={value!r} is invalid: expected {expected}. "
+                          f"Fix it on the command line, e.g. {key}=<value>.")
+
+    if cfg.env.task not in TASKS:
+        raise bad("env.task", cfg.env.task, "a Metaworld MT50 task name such as "
+                  f"drawer-open ({len(TASKS)} known: see temporal_torchrl.envs.TASKS)")
+    if cfg.encoder.name not in ENCODERS:
+        raise bad("encoder.name", cfg.encoder.name, f"one of {', '.join(ENCODERS)}")
+    positional, directional = _none(cfg.reward.positional), _none(cfg.reward.directional)
+    if positional is not None and positional not in POSITIONAL:
+        raise bad("reward.positional", cfg.reward.positional,
+                  f"none or one of {', '.join(POSITIONAL)}")
+    if directional is not None and directional not in DIRECTIONAL:
+        raise bad("reward.directional", cfg.reward.directional,
+                  f"none or one of {', '.join(DIRECTIONAL)}")
+    checks = (
+        ("reward.rho", cfg.reward.rho, lambda v: v >= 0, "a number >= 0"),
+        ("reward.lambda_", cfg.reward.lambda_, lambda v: v >= 0, "a number >= 0"),
+        ("reward.k", cfg.reward.k, lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
+        ("reward.alpha", cfg.reward.alpha, lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+        ("train.episodes", cfg.train.episodes, lambda v: isinstance(v, int) and v >= 1,
+         "an integer >= 1"),
+        ("train.preload_positives", cfg.train.preload_positives,
+         lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
+        ("train.random_steps", cfg.train.random_steps, lambda v: isinstance(v, int) and v >= 0,
+         "an integer >= 0"),
+        ("env.max_episode_steps", cfg.env.max_episode_steps,
+         lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
+        ("train.checkpoint_every", cfg.train.checkpoint_every,
+         lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
+    )
+    for key, value, ok, expected in checks:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not ok(value):
+            raise bad(key, value, expected)
+    if cfg.logger.backend not in LOGGER_BACKENDS:
+        raise bad("logger.backend", cfg.logger.backend, f"one of {', '.join(LOGGER_BACKENDS)}")
+    if not isinstance(cfg.reward.baseline, str) or not cfg.reward.baseline.strip():
+        raise bad("reward.baseline", cfg.reward.baseline, "generic, tailored or a text")
+
+
+def uses_vlm_reward(cfg: DictConfig) -> bool:
+    return _none(cfg.reward.positional) is not None or _none(cfg.reward.directional) is not None
+
+
+def baseline_text(cfg: DictConfig) -> str:
+    """``generic`` -> the generic baseline, ``tailored`` -> the task's, anything else as is."""
+    if cfg.reward.baseline == "generic":
+        return GENERIC_BASELINE
+    if cfg.reward.baseline == "tailored":
+        return get_task(cfg.env.task).baseline
+    return cfg.reward.baseline
+
+
+# --------------------------------------------------------------------------- run directory
+def check_run_dir(cfg: DictConfig) -> Path:
+    """The run directory, checked before any work: resumable, new, or replaceable."""
+    run_dir = Path(cfg.output_dir)
+    if cfg.resume:
+        if not (run_dir / CHECKPOINT).exists():
+            raise FileNotFoundError(f"resume=true but {run_dir / CHECKPOINT} does not exist; "
+                                    "start the run without resume=true.")
+    elif run_dir.exists() and any(run_dir.iterdir()) and not cfg.overwrite:
+        raise FileExistsError(f"output_dir={str(run_dir)!r} already holds a run; pass "
+                              "resume=true to continue it, overwrite=true to replace it, or "
+                              "another output_dir.")
+    return run_dir
+
+
+def create_run_dir(run_dir: Path) -> None:
+    """Start a fresh run directory (after :func:`check_run_dir` allowed it)."""
+    if run_dir.exists():
+        shutil.rmtree(run_dir)
+    (run_dir / REPLAY_DIR).mkdir(parents=True)
+
+
+# --------------------------------------------------------------------------- factories
+def make_encoder(cfg: DictConfig) -> Encoder:
+    options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
+    return load_encoder(cfg.encoder.name, checkpoint=cfg.encoder.checkpoint,
+                        device=cfg.encoder.device, **options)
+
+
+def make_temporal_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
+    """The reward with goal and baseline text embeddings from the encoder's text side."""
+    texts = encoder.embed_text([get_task(cfg.env.task).goal_prompt, baseline_text(cfg)])
+    return TemporalReward(
+        encoder.dim, texts[0].cpu(), texts[1].cpu(), positional=_none(cfg.reward.positional),
+        directional=_none(cfg.reward.directional), rho=cfg.reward.rho,
+        lambda_=cfg.reward.lambda_, k=cfg.reward.k, alpha=cfg.reward.alpha,
+        projection=cfg.reward.projection)
+
+
+def make_environment(cfg: DictConfig, encoder: Encoder | None,
+                     reward: TemporalReward | None) -> EnvBase:
+    """Metaworld env -> (render) -> embedding -> history -> temporal reward."""
+    render = encoder is not None and encoder.input_key == "pixels"
+    env = make_env(cfg.env.task, cfg.env.seed, render=render, image_size=cfg.env.image_size,
+                   camera=cfg.env.camera, fast_render=cfg.env.fast_render,
+                   max_episode_steps=cfg.env.max_episode_steps)
+    if encoder is None:
+        return env
+    if not isinstance(env, TransformedEnv):
+        env = TransformedEnv(env)
+    env.append_transform(EmbeddingTransform(encoder))
+    env.append_transform(EmbeddingHistoryTransform(k=cfg.reward.k))
+    env.append_transform(TemporalRewardTransform(reward))
+    return env
+
+
+def make_replay_buffer(cfg: DictConfig, expert_rows: int = 0,
+                       capacity: int | None = None) -> EpisodeReplayBuffer:
+    """Sized for the whole run (training episodes plus ``expert_rows``) unless configured."""
+    capacity = capacity or cfg.replay_buffer.capacity
+    if capacity is None:
+        capacity = min(cfg.train.episodes * (cfg.env.max_episode_steps + 1) + expert_rows,
+                       1_000_000)
+    return EpisodeReplayBuffer(
+        capacity, history=cfg.reward.k,
+        embedding_dtype=getattr(torch, cfg.replay_buffer.embedding_dtype),
+        label_window=cfg.reward.label_window)
+
+
+def collect_successful_experts(cfg: DictConfig, encoder: Encoder | None, count: int,
+                               max_attempts: int = 5) -> list[TensorDict]:
+    """``count`` successful scripted-expert episodes of the run's task, seed and frames.
+
+    Experts get the protocol's full 500 steps to succeed even when training episodes are
+    shorter; noisy episodes that fail are replaced (new noise seeds), up to ``max_attempts``
+    rounds. Frames are rendered when ``encoder`` reads pixels; nothing is embedded here.
+    """
+    render = encoder is not None and encoder.input_key == "pixels"
+    episodes: list[TensorDict] = []
+    for attempt in range(max_attempts):
+        batch = collect_expert_episodes(
+            cfg.env.task, cfg.env.seed, num_episodes=count - len(episodes), render=render,
+            image_size=cfg.env.image_size, camera=cfg.env.camera,
+            fast_render=cfg.env.fast_render, max_episode_steps=max(cfg.env.max_episode_steps,
+                                                                   500),
+            generator_seed=None if attempt == 0 else cfg.env.seed + 1000 * attempt)
+        episodes += [episode for episode in batch if bool(episode["next", "success"].any())]
+        if len(episodes) == count:
+            break
+    else:
+        raise RuntimeError(f"the scripted expert of {cfg.env.task} succeeded in only "
+                           f"{len(episodes)} of the {count} episodes asked for.")
+    return episodes
+
+
+def make_sac_agent(cfg: DictConfig, env: EnvBase) -> tuple[ProbabilisticActor, ValueOperator]:
+    """Tanh-Gaussian actor and a Q-network, MLPs on the state (the prior work's SAC)."""
+    action_spec = env.action_spec
+    action_dim = action_spec.shape[-1]
+    actor_net = nn.Sequential(
+        MLP(num_cells=list(cfg.sac.hidden_sizes), out_features=2 * action_dim,
+            activation_class=nn.ReLU),
+        NormalParamExtractor(scale_mapping="biased_softplus_1.0", scale_lb=1e-4))
+    actor = ProbabilisticActor(
+        TensorDictModule(actor_net, in_keys=["observation"], out_keys=["loc", "scale"]),
+        in_keys=["loc", "scale"], spec=action_spec, distribution_class=TanhNormal,
+        distribution_kwargs={"low": action_spec.space.low, "high": action_spec.space.high,
+                             "tanh_loc": False},
+        return_log_prob=False)
+    qvalue = ValueOperator(
+        MLP(num_cells=list(cfg.sac.hidden_sizes), out_features=1, activation_class=nn.ReLU),
+        in_keys=["action", "observation"])
+    with torch.no_grad():  # materialise the lazy layers
+        probe = env.fake_tensordict()
+        actor(probe)
+        qvalue(probe)
+    return actor, qvalue
+
+
+def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOperator,
+                  action_dim: int) -> tuple[SACLoss, SoftUpdate, torch.optim.Optimizer]:
+    target_entropy = (-action_dim / 2 if cfg.sac.target_entropy is None
+                      else float(cfg.sac.target_entropy))
+    loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2",
+                   alpha_init=cfg.sac.alpha_init, target_entropy=target_entropy,
+                   delay_qvalue=True)
+    loss.make_value_estimator(gamma=cfg.sac.gamma)
+    target_updater = SoftUpdate(loss, tau=cfg.sac.tau)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=cfg.sac.lr)
+    return loss, target_updater, optimizer
+
+
+def make_logger(cfg: DictConfig, run_dir: Path) -> Logger | None:
+    name = cfg.logger.exp_name or run_dir.name
+    if cfg.logger.backend == "csv":
+        return CSVLogger(name, log_dir=str(run_dir / "logs"))
+    if cfg.logger.backend == "wandb":
+        return WandbLogger(name, offline=cfg.logger.mode != "online", save_dir=str(run_dir),
+                           project=cfg.logger.project,
+                           config=OmegaConf.to_container(cfg, resolve=True))
+    return None
+
+
+# --------------------------------------------------------------------------- outputs
+def append_episode_row(run_dir: Path, row: dict) -> None:
+    path = run_dir / "episodes.csv"
+    new = not path.exists()
+    with path.open("a", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=EPISODE_COLUMNS)
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+
+
+def read_episode_rows(run_dir: Path) -> list[dict]:
+    path = run_dir / "episodes.csv"
+    if not path.exists():
+        return []
+    with path.open(newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def truncate_episode_rows(run_dir: Path, episodes: int) -> None:
+    """Keep the first ``episodes`` rows (those covered by the checkpoint) after a kill."""
+    rows = read_episode_rows(run_dir)[:episodes]
+    (run_dir / "episodes.csv").unlink(missing_ok=True)
+    for row in rows:
+        append_episode_row(run_dir, row)
+
+
+def write_json(path: Path, payload: dict) -> None:
+    temporary = path.with_suffix(".tmp")
+    temporary.write_text(json.dumps(payload, indent=2))
+    temporary.replace(path)
+
+
+# --------------------------------------------------------------------------- checkpoints
+def save_replay_episode(run_dir: Path, index: int, rows: TensorDict) -> None:
+    """One inserted episode's compact rows: the buffer is rebuilt from them on resume."""
+    torch.save(rows.to_dict(), run_dir / REPLAY_DIR / f"{index:06d}.pt")
+
+
+def load_replay_episodes(run_dir: Path, buffer: EpisodeReplayBuffer, count: int) -> None:
+    for index in range(count):
+        data = torch.load(run_dir / REPLAY_DIR / f"{index:06d}.pt", weights_only=True)
+        buffer.extend_rows(TensorDict(data, [data["step"].shape[0]]))
+
+
+def rng_state() -> dict:
+    kind, keys, position, has_gauss, cached = np.random.get_state()
+    return {"torch": torch.get_rng_state(), "python": random.getstate(),
+            "numpy": {"keys": torch.from_numpy(keys.astype(np.int64)), "position": position,
+                      "has_gauss": has_gauss, "cached": cached}}
+
+
+def set_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    random.setstate(state["python"])
+    numpy_state = state["numpy"]
+    np.random.set_state(("MT19937", numpy_state["keys"].numpy().astype(np.uint32),
+                         numpy_state["position"], numpy_state["has_gauss"],
+                         numpy_state["cached"]))
+
+
+def save_checkpoint(run_dir: Path, state: dict) -> None:
+    """Written to a temporary file and renamed: a kill never leaves a half-written checkpoint."""
+    temporary = run_dir / (CHECKPOINT + ".tmp")
+    torch.save(state, temporary)
+    temporary.replace(run_dir / CHECKPOINT)
+
+
+def load_checkpoint(run_dir: Path) -> dict:
+    return torch.load(run_dir / CHECKPOINT, weights_only=True)

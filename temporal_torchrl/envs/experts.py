@@ -1,0 +1,123 @@
+"""Scripted-expert episodes in the env's own TensorDict layout.
+
+They are the stage-2 preloaded positives (thesis chapter 5: 50 positive episodes before training)
+and the source of the goal image s_g (the first success frame), so they are collected through
+:func:`~temporal_torchrl.envs.make_env` with the caller's render settings: their frames are the
+frames training renders, pixel for pixel, from the same seed's layout.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+from torchrl.envs.utils import step_mdp
+
+from temporal_torchrl.envs.metaworld_env import make_env
+from temporal_torchrl.envs.tasks import TaskSpec, get_task
+
+_GOAL_SLICE = slice(36, 39)
+
+
+def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: int = 1,
+                            noise: float = 0.1, render: bool = False, image_size: int = 224,
+                            camera: str = "corner2", fast_render: bool = True,
+                            steps_after_success: int = 5, max_episode_steps: int = 500,
+                            generator_seed: int | None = None) -> list[TensorDict]:
+    """Run Metaworld's scripted policy on the fixed-goal, goal-hidden task.
+
+    Each action is the expert's action plus Gaussian noise, a = clip(pi(o) + noise * eps, -1, 1)
+    with eps ~ N(0, I): with a fixed goal and no noise every episode would be identical.
+    The expert reads the goal from ``obs[36:39]``, which the goal-hidden env zeroes, so the true
+    goal of the layout is written into the expert's copy of the observation (the push expert
+    never succeeds otherwise); the stored observations stay goal-hidden, as in training.
+
+    An episode is cut ``steps_after_success`` steps after its first success (Metaworld experts
+    can lose the success again later); its last step is then marked ``truncated`` and ``done``
+    so episode boundaries stay visible in a replay buffer. An episode with no success runs to
+    ``max_episode_steps`` and ends truncated, as any env episode does.
+
+    Args:
+        task: short task name.
+        seed: the layout, as in :func:`make_env` (use the training run's seed).
+        num_episodes: number of episodes.
+        noise: standard deviation of the action noise.
+        render, image_size, camera, fast_render: as in :func:`make_env`; pass the training
+            settings so the frames match the training frames.
+        steps_after_success: steps kept after the first success.
+        max_episode_steps: episode length when no success happens.
+        generator_seed: seed of the noise generator; ``None`` derives it from ``seed``, so the
+            same call returns the same episodes.
+
+    Returns:
+        One TensorDict [T] per episode, in the layout ``env.rollout()`` gives (root keys at step
+        t, the step's results under ``"next"``; ``"pixels"`` included when rendering).
+
+    Example:
+        >>> from temporal_torchrl.envs import collect_expert_episodes, first_success_index
+        >>> episode, = collect_expert_episodes("button-press-topdown", seed=0)
+        >>> bool(episode["next", "success"].any()), len(episode) == first_success_index(episode) + 6
+        (True, True)
+    """
+    spec = get_task(task)
+    if num_episodes < 0 or noise < 0 or steps_after_success < 0:
+        raise ValueError(
+            f"num_episodes={num_episodes}, noise={noise}, steps_after_success="
+            f"{steps_after_success}: all three must be non-negative."
+        )
+    env = make_env(spec, seed, render=render, image_size=image_size, camera=camera,
+                   fast_render=fast_render, max_episode_steps=max_episode_steps)
+    base_env = getattr(env, "base_env", env)
+    true_goal = base_env.goal_position
+    rng = np.random.default_rng(seed if generator_seed is None else generator_seed)
+    episodes = []
+    try:
+        for _ in range(num_episodes):
+            expert = spec.make_expert()
+            tensordict = env.reset()
+            steps, first_success = [], None
+            for t in range(max_episode_steps):
+                observation = tensordict["observation"].numpy().astype(np.float64)
+                observation[_GOAL_SLICE] = true_goal
+                with warnings.catch_warnings():
+                    # Metaworld's policies warn whenever their gains exceed the action range,
+                    # which the clip below handles.
+                    warnings.filterwarnings("ignore", "Constant", UserWarning)
+                    action = expert.get_action(observation)
+                action = action + noise * rng.standard_normal(4)
+                tensordict["action"] = torch.as_tensor(np.clip(action, -1.0, 1.0),
+                                                       dtype=torch.float32)
+                tensordict = env.step(tensordict)
+                steps.append(tensordict)
+                if first_success is None and tensordict["next", "success"].item():
+                    first_success = t
+                if tensordict["next", "done"].item():
+                    break
+                if first_success is not None and t >= first_success + steps_after_success:
+                    tensordict["next", "truncated"] = torch.ones(1, dtype=torch.bool)
+                    tensordict["next", "done"] = torch.ones(1, dtype=torch.bool)
+                    break
+                tensordict = step_mdp(tensordict)
+            episodes.append(torch.stack(steps))
+    finally:
+        env.close()
+    return episodes
+
+
+def first_success_index(episode: TensorDict) -> int:
+    """Index t of the first step whose ``("next", "success")`` is True.
+
+    ``episode["next", "pixels"][t]`` is then the first success frame (the goal image).
+
+    Raises:
+        ValueError: when the episode never succeeds.
+    """
+    success = episode["next", "success"].reshape(len(episode), -1).any(-1)
+    if not success.any():
+        raise ValueError(
+            f"This episode of {len(episode)} steps never succeeds: keep only successful episodes "
+            "(episode['next', 'success'].any()) before asking for the first success."
+        )
+    return int(success.nonzero()[0, 0])

@@ -1,0 +1,188 @@
+"""End-to-end runs of recipes/sac_temporal.py: every reward variant, stage 2, resume, bad config."""
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+RECIPES = Path(__file__).resolve().parents[1] / "recipes"
+sys.path.insert(0, str(RECIPES))
+
+import sac_temporal  # noqa: E402
+import utils  # noqa: E402
+
+# Tiny but complete: 20-step episodes, updates from step 11 on, small networks and batches.
+QUICK = [
+    "env.max_episode_steps=20", "train.episodes=3", "train.random_steps=10",
+    "+encoder.options.dim=16", "sac.batch_size=16", "sac.hidden_sizes=[32,32]",
+    "reward.batch_size=16", "reward.gap=3", "logger.backend=none", "train.progress=false",
+]
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """Tiny networks run fastest on one thread; two threads spin against each other on a
+    busy 2-core machine (10x slower). Restored afterwards for the other test files."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def config(tmp_path, *overrides):
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        return compose("config", overrides=[*QUICK, f"output_dir={tmp_path / 'run'}",
+                                             *overrides])
+
+
+def episode_rows(run_dir: Path) -> list[dict]:
+    with (run_dir / "episodes.csv").open() as file:
+        return list(csv.DictReader(file))
+
+
+VARIANTS = [("none", "none"), ("liv", "none"), ("furl", "none"), ("p1", "none"),
+            ("p2", "none"), ("p3", "none"), ("p4", "none"), ("furl", "d1"), ("furl", "d2"),
+            ("furl", "d3"), ("furl", "d4"), ("furl", "d5")]
+
+
+@pytest.mark.parametrize(("positional", "directional"), VARIANTS)
+def test_every_reward_variant_runs(tmp_path, positional, directional):
+    cfg = config(tmp_path, f"reward.positional={positional}",
+                 f"reward.directional={directional}", "reward.lambda_=4.0")
+    summary = sac_temporal.train(cfg)
+    run_dir = tmp_path / "run"
+    rows = episode_rows(run_dir)
+    assert [int(row["episode"]) for row in rows] == [1, 2, 3]
+    assert [int(row["env_steps"]) for row in rows] == [20, 40, 60]
+    assert all(float(row["return"]) <= 0 for row in rows)
+    if positional == directional == "none":
+        assert all(float(row["mean_vlm_reward"]) == 0.0 for row in rows)
+    else:
+        assert any(float(row["mean_vlm_reward"]) != 0.0 for row in rows)
+    saved = json.loads((run_dir / "summary.json").read_text())
+    assert saved["episodes"] == 3 and saved["env_steps"] == 60
+    assert saved["ttfs"] == summary["ttfs"] and 1 <= saved["ttfs"] <= 1000
+    assert saved["ras"] == {"value": None, "budget": 300, "window": 150}
+    assert saved["config"]["reward"]["positional"] == positional
+    assert saved["steps_per_second"] > 0
+
+
+def test_stage_two_preloads_positive_experts(tmp_path):
+    cfg = config(tmp_path, "protocol=stage2", "train.preload_positives=2", "train.episodes=2",
+                 "reward.directional=d3")
+    assert cfg.train.preload_positives == 2
+    sac_temporal.train(cfg)
+    run_dir = tmp_path / "run"
+    assert [row["stage"] for row in episode_rows(run_dir)] == ["2", "2"]
+    assert len(list((run_dir / "replay").iterdir())) == 4  # 2 experts + 2 episodes
+    state = utils.load_checkpoint(run_dir)
+    assert state["inserted"] == 4 and state["episode"] == 2
+
+
+def test_heads_are_finetuned_during_training(tmp_path):
+    cfg = config(tmp_path, "reward.directional=d3", "reward.l2_margin=0.0")
+    sac_temporal.train(cfg)
+    trained = utils.load_checkpoint(tmp_path / "run")["reward"]
+    torch.manual_seed(cfg.env.seed)
+    encoder = utils.make_encoder(cfg)
+    initial = utils.make_temporal_reward(cfg, encoder).state_dict()
+    for key in ("positional_heads.image.0.weight", "directional_heads.image.0.weight"):
+        assert not torch.equal(trained[key], initial[key]), key
+
+
+def test_kill_and_resume_continues_the_run(tmp_path):
+    sac_temporal.train(config(tmp_path, "train.episodes=4", "train.stop_after_episodes=2"))
+    run_dir = tmp_path / "run"
+    assert len(episode_rows(run_dir)) == 2 and not (run_dir / "summary.json").exists()
+    # a killed run leaves an episode row the checkpoint may not cover: it is dropped on resume
+    utils.append_episode_row(run_dir, {"episode": 3, "env_steps": 999, "success": 0,
+                                       "return": 0.0, "mean_vlm_reward": 0.0, "stage": 1})
+    with pytest.raises(FileExistsError, match="resume=true"):
+        sac_temporal.train(config(tmp_path, "train.episodes=4"))
+    summary = sac_temporal.train(config(tmp_path, "train.episodes=4", "resume=true"))
+    rows = episode_rows(run_dir)
+    assert [int(row["episode"]) for row in rows] == [1, 2, 3, 4]
+    assert [int(row["env_steps"]) for row in rows] == [20, 40, 60, 80]
+    assert summary["episodes"] == 4 and summary["env_steps"] == 80
+    assert utils.load_checkpoint(run_dir)["inserted"] == 4
+
+
+@pytest.mark.slow
+def test_killed_process_resumes(tmp_path):
+    """A real SIGKILL in the middle of an episode, then resume=true in a new process."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    run_dir = tmp_path / "run"
+    args = [sys.executable, str(RECIPES / "sac_temporal.py"), *QUICK, f"output_dir={run_dir}",
+            "train.threads=1"]
+    process = subprocess.Popen([*args, "train.episodes=1000"], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while time.time() < deadline and (not (run_dir / "episodes.csv").exists()
+                                      or len(episode_rows(run_dir)) < 2):
+        time.sleep(0.05)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    done = utils.load_checkpoint(run_dir)["episode"]
+    assert done >= 2
+    finished = subprocess.run([*args, f"train.episodes={done + 1}", "resume=true"],
+                              capture_output=True, text=True, timeout=300)
+    assert finished.returncode == 0, finished.stderr[-2000:]
+    rows = episode_rows(run_dir)
+    assert [int(row["episode"]) for row in rows] == list(range(1, done + 2))
+    assert [int(row["env_steps"]) for row in rows] == [20 * i for i in range(1, done + 2)]
+
+
+@pytest.mark.slow
+def test_rendering_with_random_liv_checkpoint(tmp_path):
+    from temporal_torchrl.encoders import save_random_liv_checkpoint
+
+    checkpoint = tmp_path / "liv.pt"
+    save_random_liv_checkpoint(checkpoint)
+    cfg = config(tmp_path, "encoder.name=liv", f"encoder.checkpoint={checkpoint}",
+                 "~encoder.options.dim", "env.image_size=64", "env.max_episode_steps=5",
+                 "train.episodes=2", "train.random_steps=3", "reward.directional=d3",
+                 "sac.batch_size=4", "reward.batch_size=4")
+    summary = sac_temporal.train(cfg)
+    assert summary["encoder"] == "liv" and summary["env_steps"] == 10
+    rows = episode_rows(tmp_path / "run")
+    assert [int(row["env_steps"]) for row in rows] == [5, 10]
+
+
+@pytest.mark.parametrize(("override", "key"), [
+    ("env.task=not-a-task", "env.task"), ("encoder.name=clip9", "encoder.name"),
+    ("reward.positional=p9", "reward.positional"), ("reward.directional=d7", "reward.directional"),
+    ("reward.rho=-0.1", "reward.rho"), ("reward.lambda_=-1", "reward.lambda_"),
+    ("reward.k=0", "reward.k"), ("train.episodes=0", "train.episodes"),
+    ("logger.backend=tensorboard", "logger.backend"),
+])
+def test_bad_config_stops_before_any_work(tmp_path, override, key):
+    with pytest.raises(ValueError, match=key.replace(".", r"\.")):
+        sac_temporal.train(config(tmp_path, override))
+    assert not (tmp_path / "run").exists()
+
+
+def test_existing_run_needs_overwrite(tmp_path):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "episodes.csv").write_text("old")
+    with pytest.raises(FileExistsError, match="overwrite=true"):
+        sac_temporal.train(config(tmp_path, "train.episodes=1"))
+    sac_temporal.train(config(tmp_path, "train.episodes=1", "overwrite=true"))
+    assert len(episode_rows(tmp_path / "run")) == 1
+
+
+def test_presets_compose(tmp_path):
+    best = config(tmp_path, "preset=best", "protocol=stage2")
+    assert (best.reward.positional, best.reward.directional) == ("furl", "d3")
+    assert (best.reward.rho, best.reward.lambda_, best.reward.baseline) == (1.0, 4.0, "generic")
+    assert best.train.preload_positives == 50 and best.encoder.name == "liv"
+    d5 = config(tmp_path, "preset=d5")
+    assert (d5.reward.lambda_, d5.reward.rho, d5.train.preload_positives) == (80.0, 0.05, 0)
+    assert config(tmp_path, "preset=furl_rho1").reward.rho == 1.0
