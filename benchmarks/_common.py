@@ -36,7 +36,7 @@ def machine_description() -> str:
 
 def rate(fn: Callable[[], object], items_per_call: int, min_seconds: float = 2.0,
          warmup_calls: int = 2, sync: Callable[[], None] | None = None) -> float:
-    """Items per second of ``fn``, timed over at least ``min_seconds`` after ``warmup_calls`` calls."""
+    """Items per second of ``fn``, timed over ``min_seconds`` after ``warmup_calls`` calls."""
     for _ in range(warmup_calls):
         fn()
     if sync is not None:

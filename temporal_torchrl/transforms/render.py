@@ -6,17 +6,16 @@ The frames o_t are what the VLM image encoder embeds, s_t = phi_I(o_t) (thesis c
 from __future__ import annotations
 
 import atexit
-import os
 import weakref
 
-# temporal_torchrl/__init__.py (run before this module) picks the GL backend; see also
-# _match_gl_backend_to_environment for scripts that imported MuJoCo (via torchrl) first.
 import mujoco
 import numpy as np
 import torch
 from tensordict import TensorDictBase
 from torchrl.data import Bounded, Composite
 from torchrl.envs.transforms import Transform
+
+from temporal_torchrl._headless_gl import match_mujoco_backend
 
 
 class RenderTransform(Transform):
@@ -118,7 +117,7 @@ class RenderTransform(Transform):
         )
 
     def _build_renderer(self) -> None:
-        _match_gl_backend_to_environment()
+        match_mujoco_backend()
         model, data = self._mujoco_model_and_data()
         self.validate_camera(model)
         quality, global_ = model.vis.quality, model.vis.global_
@@ -210,24 +209,6 @@ class RenderTransform(Transform):
         return (f"{type(self).__name__}(camera={self.camera!r}, image_size=({self.height}, "
                 f"{self.width}), fast={self.fast}, out_key={self.out_key!r}, "
                 f"enabled={self.enabled})")
-
-
-def _match_gl_backend_to_environment() -> None:
-    """Use EGL when ``MUJOCO_GL=egl`` although MuJoCo was imported before it was set.
-
-    MuJoCo reads ``MUJOCO_GL`` once, when first imported, and ``import torchrl.envs`` imports
-    MuJoCo: a script that imports torchrl before temporal_torchrl gets GLFW, which cannot open a
-    context without a display, although the package has chosen EGL by then.
-    """
-    from mujoco import gl_context
-
-    chosen = getattr(gl_context, "GLContext", None)
-    if os.environ.get("MUJOCO_GL", "").lower() == "egl" and chosen is not None \
-            and chosen.__module__ != "mujoco.egl":
-        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-        from mujoco.egl import GLContext
-
-        gl_context.GLContext = GLContext
 
 
 # Renderers still alive at interpreter exit must be closed before MuJoCo terminates the EGL
