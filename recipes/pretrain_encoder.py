@@ -139,14 +139,18 @@ def collect_training_videos(args: argparse.Namespace) -> VideoDataset:
                         torch.tensor(text_ids), [TASKS[task].goal_prompt for task in tasks])
 
 
-def load_or_collect(args: argparse.Namespace) -> VideoDataset:
+def load_or_collect(args: argparse.Namespace) -> tuple[VideoDataset, float]:
+    """The training videos and the seconds their generation took (read back from the cache)."""
     cache = Path(args.data_cache) if args.data_cache else None
     if cache is not None and cache.is_file():
-        return VideoDataset(**torch.load(cache, weights_only=True))
+        payload = torch.load(cache, weights_only=True)
+        return VideoDataset(**payload["dataset"]), float(payload["seconds"])
+    start = time.perf_counter()
     dataset = collect_training_videos(args)
+    seconds = time.perf_counter() - start
     if cache is not None:
-        torch.save(dataset.__dict__, cache)
-    return dataset
+        torch.save({"dataset": dataset.__dict__, "seconds": seconds}, cache)
+    return dataset, seconds
 
 
 def random_shift(images: torch.Tensor, shift: int, generator: torch.Generator,
@@ -252,8 +256,9 @@ def train(encoder: SmallEncoder, dataset: VideoDataset, args: argparse.Namespace
 def write_model_card(path: Path, args: argparse.Namespace, dataset: VideoDataset,
                      encoder: SmallEncoder, timings: dict[str, float], history: list[dict],
                      rows: list[dict], weights_path: Path) -> None:
-    command = "python recipes/pretrain_encoder.py " + " ".join(
-        shlex.quote(a) for a in sys.argv[1:])
+    # --data-cache only saves or reuses the generated videos: it does not change the result.
+    arguments = [a for a in sys.argv[1:] if a != "--data-cache" and a != args.data_cache]
+    command = " ".join(["python recipes/pretrain_encoder.py", *map(shlex.quote, arguments)])
     parameters = sum(p.numel() for p in encoder.parameters())
     last = history[-1]
     size, dim = args.image_size, args.embedding_dim
@@ -302,7 +307,7 @@ each other). A batch holds {args.batch_size} videos, each giving a segment start
   seed {args.seed}, {args.threads} CPU threads.
 - Wall time: data {timings["data"]:.0f} s, training {timings["train"]:.0f} s, evaluation
   {timings["evaluation"]:.0f} s, on {timings["machine"]} (shared with other jobs).
-- Last logged training metrics (mean over its last 100 steps): loss {last["loss"]:.4f},
+- Last logged training metrics (mean over its last {args.log_every} steps): loss {last["loss"]:.4f},
   VIP image goal {last["loss_vip_image"]:.4f}, VIP text goal {last["loss_vip_text"]:.4f},
   InfoNCE {last["loss_contrastive"]:.4f}; fraction of (t, t+1) pairs whose value increases:
   image goal {last["value_increase_image"]:.3f}, text goal {last["value_increase_text"]:.3f}.
@@ -348,9 +353,7 @@ def main(argv: list[str] | None = None) -> None:
     output_dir.mkdir(parents=True, exist_ok=True)
 
     print("1/4 collecting training videos", flush=True)
-    start = time.perf_counter()
-    dataset = load_or_collect(args)
-    timings["data"] = time.perf_counter() - start
+    dataset, timings["data"] = load_or_collect(args)
     print(f"  {dataset.num_videos} videos, {len(dataset.frames)} frames, "
           f"{timings['data']:.0f} s", flush=True)
 

@@ -34,7 +34,7 @@ def test_shipped_encoder_is_frozen_and_differs_from_random_weights(shipped):
     assert not any(p.requires_grad for p in shipped.parameters())
     assert not shipped.training
     torch.manual_seed(0)
-    random = SmallEncoder(**shipped.config())
+    random = SmallEncoder(**shipped.config()).freeze()
     frames = torch.randint(0, 256, (2, 64, 64, 3), dtype=torch.uint8)
     assert not torch.allclose(shipped.embed_images(frames), random.embed_images(frames))
 
@@ -63,7 +63,8 @@ def test_text_embeddings_are_cached_per_prompt(shipped):
 
 def test_save_and_load_round_trip(tmp_path):
     torch.manual_seed(1)
-    encoder = SmallEncoder(image_size=32, embedding_dim=16, width=8, token_dim=8, name="tiny")
+    encoder = SmallEncoder(image_size=32, embedding_dim=16, width=8, token_dim=8,
+                           name="tiny").freeze()
     path = tmp_path / "tiny.pt"
     encoder.save(path, dtype=torch.float32)
     loaded = SmallEncoder.from_pretrained(path)
