@@ -6,7 +6,7 @@ the episode replay buffer, with SAC's rewards relabelled from the stored embeddi
 as they are now. Each ended episode is labelled and inserted into the buffer (so SAC samples a
 transition from the end of its episode on), then an episode row and a checkpoint are written.
 
-    python recipes/sac_temporal.py                                # quick default: state encoder
+    python recipes/sac_temporal.py                                # quick default (offline, CPU)
     python recipes/sac_temporal.py preset=best protocol=stage2 env.task=door-open env.seed=2
     python recipes/sac_temporal.py output_dir=runs/x resume=true  # continue a killed run
 
@@ -59,6 +59,9 @@ def train(cfg: DictConfig) -> dict | None:
     encoder = utils.make_encoder(cfg) if vlm else None
     reward = utils.make_temporal_reward(cfg, encoder) if vlm else None
     env = utils.make_environment(cfg, encoder, reward)
+    print(f"encoder: {encoder.name}, {encoder.dim}-d, weights: "
+          f"{cfg.encoder.checkpoint or 'built-in or downloaded'}" if encoder is not None
+          else "encoder: none (no VLM reward)")
     reward_transform = env.transform[-1] if vlm else None
 
     # ---- expert episodes: stage-2 positives and the goal image s_g

@@ -201,8 +201,9 @@ def test_state_encoder_is_seeded_and_render_free():
 
 
 def test_load_encoder_refuses_unknown_names():
-    assert ENCODERS == ("liv", "open_clip", "state")
-    with pytest.raises(ValueError, match="unknown encoder 'vip'.*'liv', 'open_clip', 'state'"):
+    assert ENCODERS == ("liv", "open_clip", "state", "metaworld_small")
+    with pytest.raises(ValueError, match="unknown encoder 'vip'.*'liv', 'open_clip', 'state', "
+                                         "'metaworld_small'"):
         load_encoder("vip")
     with pytest.raises(ValueError, match="no weights"):
         load_encoder("state", checkpoint="model.pt")

@@ -18,8 +18,9 @@ import utils  # noqa: E402
 # Tiny but complete: 20-step episodes, updates from step 11 on, small networks and batches.
 QUICK = [
     "env.max_episode_steps=20", "train.episodes=3", "train.random_steps=10",
-    "+encoder.options.dim=16", "sac.batch_size=16", "sac.hidden_sizes=[32,32]",
-    "reward.batch_size=16", "reward.gap=3", "logger.backend=none", "train.progress=false",
+    "encoder.name=state", "+encoder.options.dim=16", "sac.batch_size=16",
+    "sac.hidden_sizes=[32,32]", "reward.batch_size=16", "reward.gap=3", "logger.backend=none",
+    "train.progress=false",
 ]
 
 
@@ -156,6 +157,24 @@ def test_rendering_with_random_liv_checkpoint(tmp_path):
     assert [int(row["env_steps"]) for row in rows] == [5, 10]
 
 
+@pytest.mark.slow
+def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
+    """The README's main command, shortened: the defaults need no network and no weights file."""
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        cfg = compose("config", overrides=[
+            f"output_dir={tmp_path / 'run'}", "env.max_episode_steps=8", "train.episodes=2",
+            "train.random_steps=4", "sac.batch_size=4", "reward.batch_size=4",
+            "train.progress=false"])
+    assert (cfg.encoder.name, cfg.encoder.checkpoint) == ("metaworld_small", None)
+    assert (cfg.reward.positional, cfg.reward.directional) == ("furl", "d3")
+    summary = sac_temporal.train(cfg)
+    assert summary["encoder"] == "metaworld_small" and summary["env_steps"] == 16
+    assert "metaworld_small" in capsys.readouterr().out
+    rows = episode_rows(tmp_path / "run")
+    assert all(float(row["mean_vlm_reward"]) != 0.0 for row in rows)
+    assert (tmp_path / "run" / "logs").exists()
+
+
 @pytest.mark.parametrize(("override", "key"), [
     ("env.task=not-a-task", "env.task"), ("encoder.name=clip9", "encoder.name"),
     ("reward.positional=p9", "reward.positional"), ("reward.directional=d7", "reward.directional"),
@@ -179,7 +198,8 @@ def test_existing_run_needs_overwrite(tmp_path):
 
 
 def test_presets_compose(tmp_path):
-    best = config(tmp_path, "preset=best", "protocol=stage2")
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        best = compose("config", overrides=["preset=best", "protocol=stage2"])
     assert (best.reward.positional, best.reward.directional) == ("furl", "d3")
     assert (best.reward.rho, best.reward.lambda_, best.reward.baseline) == (1.0, 4.0, "generic")
     assert best.train.preload_positives == 50 and best.encoder.name == "liv"

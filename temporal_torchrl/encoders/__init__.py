@@ -7,6 +7,9 @@
 - ``"open_clip"``: any open_clip model (``model_name=...``, ``pretrained=<tag>`` or
   ``checkpoint=<local file>``).
 - ``"state"``: a render-free random projection of the state vector; NOT a vision-language model.
+- ``"metaworld_small"``: the package's own small CNN image encoder and token-averaging text
+  encoder, trained with LIV's objective on 44 Metaworld tasks (the six evaluation tasks held
+  out); its weights ship in the package (``weights/MODEL_CARD.md``), so it needs no network.
 
 Example:
     >>> from temporal_torchrl.encoders import load_encoder
@@ -26,6 +29,7 @@ from temporal_torchrl.encoders.base import Encoder
 from temporal_torchrl.encoders.liv import LIVEncoder, save_random_liv_checkpoint
 from temporal_torchrl.encoders.open_clip_encoder import OpenCLIPEncoder
 from temporal_torchrl.encoders.preprocessing import ImagePreprocessor, make_preprocessor
+from temporal_torchrl.encoders.small import SmallEncoder
 from temporal_torchrl.encoders.state import StateEncoder
 
 ENCODERS: tuple[str, ...] = ("liv", "open_clip", "state", "metaworld_small")
@@ -40,9 +44,10 @@ def load_encoder(name: str, *, checkpoint: str | os.PathLike | None = None,
         checkpoint: a local weights file (``liv``: LIV's ``model.pt``; ``open_clip``: weights
             for ``model_name``). ``state`` takes none.
         device: where the encoder's weights live.
-        **kwargs: passed to :class:`LIVEncoder`, :class:`OpenCLIPEncoder` or
-            :class:`StateEncoder` (e.g. ``preprocessing="metaworld_prior"``,
-            ``model_name="ViT-B-32", pretrained="openai"``, ``dim=64``).
+        **kwargs: passed to :class:`LIVEncoder`, :class:`OpenCLIPEncoder`,
+            :class:`StateEncoder` or :class:`SmallEncoder` (e.g.
+            ``preprocessing="metaworld_prior"``, ``model_name="ViT-B-32", pretrained="openai"``,
+            ``dim=64``).
     """
     if name == "liv":
         encoder: Encoder = LIVEncoder(checkpoint, **kwargs)
@@ -56,9 +61,7 @@ def load_encoder(name: str, *, checkpoint: str | os.PathLike | None = None,
             )
         encoder = StateEncoder(**kwargs)
     elif name == "metaworld_small":
-        # The package's own small encoder; ``checkpoint=None`` loads the shipped weights.
-        from temporal_torchrl.encoders.small import SmallEncoder
-
+        # ``checkpoint=None`` loads the shipped weights.
         encoder = SmallEncoder.from_pretrained(checkpoint, **kwargs)
     else:
         raise ValueError(f"unknown encoder {name!r}; expected one of {ENCODERS}")
@@ -71,6 +74,7 @@ __all__ = [
     "ImagePreprocessor",
     "LIVEncoder",
     "OpenCLIPEncoder",
+    "SmallEncoder",
     "StateEncoder",
     "load_encoder",
     "make_preprocessor",
