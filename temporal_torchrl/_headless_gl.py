@@ -11,12 +11,19 @@ from __future__ import annotations
 import os
 import sys
 
+#: Rasteriser threads for Mesa's software renderer (llvmpipe) when the user has not chosen.
+#: llvmpipe starts one per core; on a 2-core CPU, 4 overlap binning and rasterising and render
+#: Metaworld frames about 15% faster (84 -> 97 frames/s at 224x224, raw mujoco.Renderer too);
+#: 8 were no faster. GPU drivers ignore the variable.
+SOFTWARE_RASTERISER_THREADS = 4
+
 
 def choose_headless_backend() -> None:
     """Set ``MUJOCO_GL=egl`` when it is unset and there is no display (osmesa crashes here)."""
     if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
         os.environ["MUJOCO_GL"] = "egl"
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    os.environ.setdefault("LP_NUM_THREADS", str(SOFTWARE_RASTERISER_THREADS))
 
 
 def match_mujoco_backend() -> None:
