@@ -38,7 +38,13 @@ import utils  # noqa: E402
 
 from temporal_torchrl.data import embed_episode, goal_image_embedding, preload_experts  # noqa: E402,E501
 from temporal_torchrl.envs import get_task  # noqa: E402
-from temporal_torchrl.metrics import episode_success, ras, tt50s, ttfs  # noqa: E402
+from temporal_torchrl.metrics import (  # noqa: E402
+    DEFAULT_HORIZON,
+    episode_success,
+    ras,
+    tt50s,
+    ttfs,
+)
 from temporal_torchrl.objectives import DirectionalLoss, PositionalRankingLoss  # noqa: E402
 
 # What an episode keeps from each step (pixels never reach the buffer).
@@ -202,7 +208,7 @@ def train(cfg: DictConfig) -> dict | None:
     budget = get_task(cfg.env.task).ras_budget
     window = min(150, budget) if budget else 150
     summary = {
-        "ttfs": ttfs(successes), "tt50s": tt50s(successes),
+        "ttfs": ttfs(successes), "tt50s": tt50s(successes), "horizon": DEFAULT_HORIZON,
         "ras": {"value": ras(successes, budget, window) if budget else None,
                 "budget": budget, "window": window},
         "episodes": episode, "env_steps": env_steps,
