@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import random
 import shlex
 import sys
@@ -83,7 +84,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="episodes per task and noise level (each with its own layout)")
     parser.add_argument("--max-episode-steps", type=int, default=250,
                         help="expert episodes that have not succeeded by then are dropped")
-    parser.add_argument("--steps", type=int, default=600, help="optimiser steps")
+    parser.add_argument("--steps", type=int, default=3000, help="optimiser steps")
     parser.add_argument("--batch-size", type=int, default=16, help="videos per batch")
     parser.add_argument("--pairs-per-video", type=int, default=4,
                         help="consecutive (t, t+1) pairs sampled from each video of a batch")
@@ -256,13 +257,23 @@ def train(encoder: SmallEncoder, dataset: VideoDataset, args: argparse.Namespace
 def write_model_card(path: Path, args: argparse.Namespace, dataset: VideoDataset,
                      encoder: SmallEncoder, timings: dict[str, float], history: list[dict],
                      rows: list[dict], weights_path: Path) -> None:
-    # --data-cache only saves or reuses the generated videos: it does not change the result.
-    arguments = [a for a in sys.argv[1:] if a != "--data-cache" and a != args.data_cache]
+    # --data-cache only saves or reuses the generated videos and --output-dir only says where
+    # the files go: neither changes the result, so the reproduce command leaves them out.
+    arguments, skip = [], False
+    for argument in sys.argv[1:]:
+        if skip:
+            skip = False
+        elif argument in ("--data-cache", "--output-dir"):
+            skip = True
+        elif not argument.startswith(("--data-cache=", "--output-dir=")):
+            arguments.append(argument)
     command = " ".join(["python recipes/pretrain_encoder.py", *map(shlex.quote, arguments)])
     parameters = sum(p.numel() for p in encoder.parameters())
     last = history[-1]
     size, dim = args.image_size, args.embedding_dim
     layouts = f"{args.seed}..{args.seed + len(args.noise_levels) * args.episodes_per_noise - 1}"
+    data_note = (" (generation time of an earlier run with the same data settings, whose "
+                 "--data-cache file this run read back)") if timings["data_cached"] else ""
     card = f"""# Model card: `{args.name}`
 
 A small vision-language encoder for Metaworld, trained by this project with LIV's objective so
@@ -305,8 +316,10 @@ each other). A batch holds {args.batch_size} videos, each giving a segment start
 - {args.steps} steps of AdamW (sparse Adam for the token table), learning rate
   {args.learning_rate} (100-step warm-up, cosine decay), weight decay {args.weight_decay},
   seed {args.seed}, {args.threads} CPU threads.
-- Wall time: data {timings["data"]:.0f} s, training {timings["train"]:.0f} s, evaluation
-  {timings["evaluation"]:.0f} s, on {timings["machine"]} (shared with other jobs).
+- Wall time: data {timings["data"]:.0f} s{data_note}, training {timings["train"]:.0f} s,
+  evaluation {timings["evaluation"]:.0f} s, on {timings["machine"]}; 1-minute load average
+  {timings["load_start"]:.2f} before training and {timings["load_end"]:.2f} at its end (this
+  run's own threads included).
 - Last logged training metrics (mean over its last {args.log_every} steps): loss {last["loss"]:.4f},
   VIP image goal {last["loss_vip_image"]:.4f}, VIP text goal {last["loss_vip_text"]:.4f},
   InfoNCE {last["loss_contrastive"]:.4f}; fraction of (t, t+1) pairs whose value increases:
@@ -353,6 +366,7 @@ def main(argv: list[str] | None = None) -> None:
     output_dir.mkdir(parents=True, exist_ok=True)
 
     print("1/4 collecting training videos", flush=True)
+    timings["data_cached"] = bool(args.data_cache) and Path(args.data_cache).is_file()
     dataset, timings["data"] = load_or_collect(args)
     print(f"  {dataset.num_videos} videos, {len(dataset.frames)} frames, "
           f"{timings['data']:.0f} s", flush=True)
@@ -361,9 +375,11 @@ def main(argv: list[str] | None = None) -> None:
     torch.manual_seed(args.seed)
     encoder = SmallEncoder(image_size=args.image_size, embedding_dim=args.embedding_dim,
                            name=args.name)
+    timings["load_start"] = os.getloadavg()[0]
     start = time.perf_counter()
     history = train(encoder, dataset, args)
     timings["train"] = time.perf_counter() - start
+    timings["load_end"] = os.getloadavg()[0]
     weights_path = output_dir / f"{args.name}.pt"
     encoder.save(weights_path)
 

@@ -57,6 +57,8 @@ def train(cfg: DictConfig) -> dict | None:
     """Run (or resume) one training run; returns its summary, or None when stopped early."""
     utils.validate_config(cfg)
     run_dir = utils.check_run_dir(cfg)
+    if cfg.resume:
+        cfg = utils.resumed_config(cfg, run_dir)
     state = utils.load_checkpoint(run_dir) if cfg.resume else None
     torch.manual_seed(cfg.env.seed)
 

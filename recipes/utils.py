@@ -126,6 +126,41 @@ def check_run_dir(cfg: DictConfig) -> Path:
     return run_dir
 
 
+#: Keys a resumed run may change; every other value comes from the run's saved config.json.
+RESUMABLE_KEYS = ("resume", "overwrite", "output_dir", "train.episodes",
+                  "train.stop_after_episodes", "train.progress", "train.threads",
+                  "train.checkpoint_every")
+
+
+def resumed_config(cfg: DictConfig, run_dir: Path) -> DictConfig:
+    """The config of the run in ``run_dir``, with only :data:`RESUMABLE_KEYS` taken from ``cfg``.
+
+    A resumed run must go on with the task, encoder, reward and hyperparameters it started with,
+    whatever the command line's defaults are now; so ``resume=true output_dir=...`` is enough.
+    """
+    saved = OmegaConf.create(json.loads((run_dir / "config.json").read_text()))
+    for key in RESUMABLE_KEYS:
+        OmegaConf.update(saved, key, OmegaConf.select(cfg, key), force_add=True)
+    saved_values = _flatten(saved)
+    differing = [key for key, value in _flatten(cfg).items()
+                 if key not in RESUMABLE_KEYS and saved_values.get(key, value) != value]
+    if differing:
+        print(f"resume: continuing with {run_dir / 'config.json'}; not using the current "
+              f"values of {', '.join(differing)}")
+    return saved
+
+
+def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(tree, DictConfig):
+        tree = OmegaConf.to_container(tree, resolve=True)
+    if not isinstance(tree, dict):
+        return {prefix: tree}
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        flat.update(_flatten(value, f"{prefix}.{key}" if prefix else str(key)))
+    return flat
+
+
 def create_run_dir(run_dir: Path) -> None:
     """Start a fresh run directory (after :func:`check_run_dir` allowed it)."""
     if run_dir.exists():

@@ -114,6 +114,24 @@ def test_directional_loss_matches_thesis_terms(variant):
     assert int(out["stage"]) == 2
 
 
+def test_directional_loss_skips_episode_starts():
+    """At step 0 the observed direction is zero (s_{t-k} = s_t): such states must not count."""
+    torch.manual_seed(3)
+    dim = 6
+    reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional=None,
+                            directional="d3")
+    loss = DirectionalLoss(reward, torch.randn(dim))
+    negative = TensorDict({key: torch.randn(4, dim) for key in
+                           ("embedding", "initial_embedding", "previous_embedding")}, [4])
+    negative["step"] = torch.tensor([0, 3, 7, 9])
+    negative["previous_embedding"][0] = negative["embedding"][0]
+    later_only = negative[1:]
+    expected = loss(TensorDict({"negative": later_only.exclude("step")}, [3]))
+    out = loss(TensorDict({"negative": negative}, [4]))
+    assert out["loss_directional"].item() == pytest.approx(
+        expected["loss_directional"].item(), abs=1e-6)
+
+
 def test_directional_release_option_scores_contrast_at_plain_position():
     torch.manual_seed(2)
     dim = 6

@@ -112,6 +112,17 @@ def test_kill_and_resume_continues_the_run(tmp_path):
     assert utils.load_checkpoint(run_dir)["inserted"] == 4
 
 
+def test_resume_continues_with_the_saved_config(tmp_path, capsys):
+    sac_temporal.train(config(tmp_path, "env.task=door-open", "reward.rho=0.05",
+                              "train.episodes=2", "train.stop_after_episodes=1"))
+    # Only the run directory and resume=true are restated; the defaults name another task.
+    summary = sac_temporal.train(config(tmp_path, "resume=true", "train.episodes=2"))
+    assert summary["config"]["env"]["task"] == "door-open"
+    assert summary["config"]["reward"]["rho"] == 0.05
+    assert summary["ras"]["budget"] == 400  # door-open's, not drawer-open's 300
+    assert "not using the current values of env.task" in capsys.readouterr().out
+
+
 @pytest.mark.slow
 def test_killed_process_resumes(tmp_path):
     """A real SIGKILL in the middle of an episode, then resume=true in a new process."""

@@ -57,7 +57,9 @@ def preload_experts(buffer: EpisodeReplayBuffer, episodes: list[TensorDictBase],
 
     Episodes without embeddings are embedded with ``encoder``. They are labelled by the same
     rule as training episodes (:func:`~temporal_torchrl.data.episode_labels`): a successful expert
-    episode, cut a few steps after its first success, is positive at every step.
+    episode, cut a few steps after its first success, is positive up to its first success and
+    through the success steps right after it (steps after success flips back off, as it can in
+    door-open and push, stay unlabelled).
     """
     rows = []
     for episode in episodes:

@@ -128,7 +128,8 @@ class DirectionalLoss(LossModule):
     direction Δs_t = s_t - s_{t-k} and the direction towards the goal image embedding
     Δ̂s_t = s_g - s_t, both at the position s_t (batch means of each term).
     Stage 2 adds, on positive states, ``L^D_pos = r_D(s_t, Δ̄s_t) - r_D(s_t, Δs_t)`` with the
-    opposite direction Δ̄s_t = s_{t-k} - s_t.
+    opposite direction Δ̄s_t = s_{t-k} - s_t. States at an episode's start (``step`` 0, where the
+    observed direction is zero and the env gives no reward) are left out of both means.
 
     Args:
         reward: the :class:`TemporalReward` whose directional heads are trained.
@@ -182,16 +183,30 @@ class DirectionalLoss(LossModule):
             towards_goal = self.directional_reward(
                 self.goal_image_embedding.expand_as(s_t), s_t, negative, position=s_t,
                 variant=contrast_variant)
-            parts["loss_negative"] = observed.mean() - towards_goal.mean()
+            parts["loss_negative"] = _mean_after_start(observed - towards_goal, negative)
         if stage == 2:
             positive = tensordict["positive"]
             s_t, s_tk = positive["embedding"], positive["previous_embedding"]
             observed = self.directional_reward(s_t, s_tk, positive)
             opposite = self.directional_reward(s_tk, s_t, positive, position=s_t,
                                                variant=contrast_variant)
-            parts["loss_positive"] = opposite.mean() - observed.mean()
+            parts["loss_positive"] = _mean_after_start(opposite - observed, positive)
         total = sum(parts.values(), self.goal_image_embedding.new_zeros(()))
         out = {name: value.detach() for name, value in parts.items()}
         out["loss_directional"] = total
         out["stage"] = torch.tensor(stage)
         return TensorDict(out, [])
+
+
+def _mean_after_start(values: Tensor, states: TensorDictBase) -> Tensor:
+    """Mean over the states past their episode's first (``step`` > 0, when the batch says).
+
+    At an episode's first state s_{t-k} = s_0 = s_t, so the observed direction is zero: the env
+    never rewards that input (rewards start at s_1), and training on it only pulls the zero
+    direction's reward down.
+    """
+    step = states.get("step", None)
+    if step is None:
+        return values.mean()
+    keep = step.reshape(values.shape) > 0
+    return (values * keep).sum() / keep.sum().clamp_min(1)
