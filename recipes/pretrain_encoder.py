@@ -84,8 +84,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="episodes per task and noise level (each with its own layout)")
     parser.add_argument("--max-episode-steps", type=int, default=250,
                         help="expert episodes that have not succeeded by then are dropped")
-    parser.add_argument("--steps", type=int, default=1500, help="optimiser steps")
-    parser.add_argument("--batch-size", type=int, default=32, help="videos per batch")
+    parser.add_argument("--steps", type=int, default=600, help="optimiser steps")
+    parser.add_argument("--batch-size", type=int, default=16, help="videos per batch")
     parser.add_argument("--pairs-per-video", type=int, default=4,
                         help="consecutive (t, t+1) pairs sampled from each video of a batch")
     parser.add_argument("--learning-rate", type=float, default=3e-4)
