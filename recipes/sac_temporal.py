@@ -67,9 +67,7 @@ def train(cfg: DictConfig) -> dict | None:
     encoder = utils.make_encoder(cfg) if vlm else None
     reward = utils.make_temporal_reward(cfg, encoder) if vlm else None
     env = utils.make_environment(cfg, encoder, reward)
-    print(f"encoder: {encoder.name}, {encoder.dim}-d, weights: "
-          f"{cfg.encoder.checkpoint or 'built-in or downloaded'}" if encoder is not None
-          else "encoder: none (no VLM reward)")
+    print(utils.describe_encoder(cfg, encoder))
     reward_transform = env.transform[-1] if vlm else None
 
     # ---- expert episodes: stage-2 positives and the goal image s_g

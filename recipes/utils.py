@@ -175,6 +175,19 @@ def make_encoder(cfg: DictConfig) -> Encoder:
                         device=cfg.encoder.device, **options)
 
 
+def describe_encoder(cfg: DictConfig, encoder: Encoder | None) -> str:
+    """One line naming the encoder a run uses and where its weights came from."""
+    if encoder is None:
+        return "encoder: none (no VLM reward)"
+    weights = {"metaworld_small": "shipped with the package",
+               "liv": "Hugging Face Hub jasonyma/LIV (cached)",
+               "state": "none (a fixed random projection, not a VLM)"}.get(
+        cfg.encoder.name, "open_clip's pretrained tag")
+    if cfg.encoder.checkpoint:
+        weights = str(cfg.encoder.checkpoint)
+    return f"encoder: {encoder.name}, {encoder.dim}-d, weights: {weights}"
+
+
 def make_temporal_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
     """The reward with goal and baseline text embeddings from the encoder's text side."""
     texts = encoder.embed_text([get_task(cfg.env.task).goal_prompt, baseline_text(cfg)])

@@ -180,7 +180,8 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     assert (cfg.reward.positional, cfg.reward.directional) == ("furl", "d3")
     summary = sac_temporal.train(cfg)
     assert summary["encoder"] == "metaworld_small" and summary["env_steps"] == 16
-    assert "metaworld_small" in capsys.readouterr().out
+    assert "encoder: metaworld_small, 256-d, weights: shipped with the package" in (
+        capsys.readouterr().out)
     rows = episode_rows(tmp_path / "run")
     assert all(float(row["mean_vlm_reward"]) != 0.0 for row in rows)
     assert (tmp_path / "run" / "logs").exists()
