@@ -165,6 +165,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
+    for flag, path in (("--checkpoint", args.checkpoint),
+                       ("--liv-checkpoint", args.liv_checkpoint)):
+        if path is not None and not Path(path).is_file():
+            parser.error(f"{flag} {path!r} is not a file: pass the path of a weights file "
+                         "(LIV's model.pt from https://huggingface.co/jasonyma/LIV for "
+                         "--liv-checkpoint), or leave the flag out.")
     torch.set_num_threads(args.threads)
     config = SmallEncoder.from_pretrained(args.checkpoint).config()
     small_videos = collect_evaluation_videos(int(config["image_size"]), args.episodes, args.seed)
