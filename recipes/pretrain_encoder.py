@@ -357,6 +357,10 @@ numbers up to the nondeterminism of multithreaded floating-point kernels.
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
+    if args.liv_checkpoint is not None and not Path(args.liv_checkpoint).is_file():
+        raise SystemExit(f"--liv-checkpoint {args.liv_checkpoint!r} is not a file: pass the path "
+                         "of LIV's model.pt (https://huggingface.co/jasonyma/LIV), or leave the "
+                         "flag out.")
     torch.set_num_threads(args.threads)
     random.seed(args.seed)
     np.random.seed(args.seed)
