@@ -16,9 +16,6 @@ Run: ``python benchmarks/bench_envs.py [--quick] [--json out.json]``.
 
 from __future__ import annotations
 
-import temporal_torchrl  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-
-# isort: split
 import mujoco
 import numpy as np
 from _common import parse_args, rate, report

@@ -17,11 +17,6 @@ Runs on one torch thread (the machine may be shared). ``--quick`` shortens every
 
 from __future__ import annotations
 
-# torchrl imports mujoco: the package must choose the GL backend first.
-import temporal_torchrl  # noqa: F401  (headless GL backend before anything loads mujoco)
-
-# isort: split
-
 import sys
 import tempfile
 import time

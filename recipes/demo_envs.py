@@ -11,9 +11,6 @@ import argparse
 import time
 from pathlib import Path
 
-import temporal_torchrl  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-
-# isort: split
 import torch
 from PIL import Image
 

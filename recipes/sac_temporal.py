@@ -17,11 +17,6 @@ resolved config), ``checkpoint.pt`` + ``replay/`` (resume), ``logs/`` (CSV logge
 
 from __future__ import annotations
 
-# torchrl imports mujoco: the package must choose the GL backend first.
-import temporal_torchrl  # noqa: F401  (headless GL backend before anything loads mujoco)
-
-# isort: split
-
 import sys
 import time
 from pathlib import Path

@@ -2,11 +2,6 @@
 
 from __future__ import annotations
 
-# torchrl imports mujoco: the package must choose the GL backend first.
-import temporal_torchrl  # noqa: F401  (headless GL backend before anything loads mujoco)
-
-# isort: split
-
 import csv
 import json
 import random
@@ -348,7 +343,7 @@ def load_replay_episodes(run_dir: Path, buffer: EpisodeReplayBuffer, count: int)
 
 
 def rng_state() -> dict:
-    kind, keys, position, has_gauss, cached = np.random.get_state()
+    _, keys, position, has_gauss, cached = np.random.get_state()
     return {"torch": torch.get_rng_state(), "python": random.getstate(),
             "numpy": {"keys": torch.from_numpy(keys.astype(np.int64)), "position": position,
                       "has_gauss": has_gauss, "cached": cached}}

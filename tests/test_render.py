@@ -1,8 +1,5 @@
 """RenderTransform: upright frames, declared specs, fast vs default look, several envs, switch."""
 
-import temporal_torchrl  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-
-# isort: split
 import os
 import subprocess
 import sys
