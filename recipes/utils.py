@@ -79,6 +79,9 @@ def validate_config(cfg: DictConfig) -> None:
          lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
         ("train.random_steps", cfg.train.random_steps, lambda v: isinstance(v, int) and v >= 0,
          "an integer >= 0"),
+        ("train.expert_steps_after_success", 0 if cfg.train.expert_steps_after_success is None
+         else cfg.train.expert_steps_after_success, lambda v: isinstance(v, int) and v >= 0,
+         "an integer >= 0, or null for whole expert episodes"),
         ("env.max_episode_steps", cfg.env.max_episode_steps,
          lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
         ("train.checkpoint_every", cfg.train.checkpoint_every,
@@ -132,8 +135,10 @@ def resumed_config(cfg: DictConfig, run_dir: Path) -> DictConfig:
 
     A resumed run must go on with the task, encoder, reward and hyperparameters it started with,
     whatever the command line's defaults are now; so ``resume=true output_dir=...`` is enough.
+    Keys the saved config lacks (added to the recipe after the run started) take ``cfg``'s values.
     """
-    saved = OmegaConf.create(json.loads((run_dir / "config.json").read_text()))
+    current = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
+    saved = OmegaConf.merge(current, json.loads((run_dir / "config.json").read_text()))
     for key in RESUMABLE_KEYS:
         OmegaConf.update(saved, key, OmegaConf.select(cfg, key), force_add=True)
     saved_values = _flatten(saved)
@@ -228,8 +233,10 @@ def collect_successful_experts(cfg: DictConfig, encoder: Encoder | None, count: 
     """``count`` successful scripted-expert episodes of the run's task, seed and frames.
 
     Experts get the protocol's full 500 steps to succeed even when training episodes are
-    shorter; noisy episodes that fail are replaced (new noise seeds), up to ``max_attempts``
-    rounds. Frames are rendered when ``encoder`` reads pixels; nothing is embedded here.
+    shorter, and are cut ``train.expert_steps_after_success`` steps after their first success
+    (``null``: whole episodes); noisy episodes that fail are replaced (new noise seeds), up to
+    ``max_attempts`` rounds. Frames are rendered when ``encoder`` reads pixels; nothing is
+    embedded here.
     """
     render = encoder is not None and encoder.input_key == "pixels"
     episodes: list[TensorDict] = []
@@ -239,6 +246,7 @@ def collect_successful_experts(cfg: DictConfig, encoder: Encoder | None, count: 
             image_size=cfg.env.image_size, camera=cfg.env.camera,
             fast_render=cfg.env.fast_render, max_episode_steps=max(cfg.env.max_episode_steps,
                                                                    500),
+            steps_after_success=cfg.train.expert_steps_after_success,
             generator_seed=None if attempt == 0 else cfg.env.seed + 1000 * attempt)
         episodes += [episode for episode in batch if bool(episode["next", "success"].any())]
         if len(episodes) == count:

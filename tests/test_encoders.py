@@ -7,6 +7,7 @@ import sys
 import open_clip
 import pytest
 import torch
+from tensordict import TensorDict
 
 from temporal_torchrl.encoders import (
     ENCODERS,
@@ -19,6 +20,7 @@ from temporal_torchrl.encoders import (
     save_random_liv_checkpoint,
 )
 from temporal_torchrl.encoders.preprocessing import CLIP_MEAN, CLIP_STD
+from temporal_torchrl.transforms import EmbeddingTransform
 
 PROMPTS = ["open the drawer", "robot arm beside table"]
 
@@ -70,6 +72,22 @@ def test_liv_reproduces_source_image_and_text_embeddings(liv_files, frames):
     # Not normalised (LIV compares with cosine similarity itself).
     assert not torch.allclose(text.norm(dim=-1), torch.ones(2))
     assert not torch.allclose(text[0], text[1])
+
+
+@pytest.mark.slow
+def test_liv_channels_last_and_bf16_autocast_keep_the_embeddings(liv_files, frames):
+    """The GPU benchmark's configuration, run on the CPU: same embeddings, up to bf16 rounding."""
+    path, _, encoder = liv_files
+    frames = frames[:1]
+    fast = LIVEncoder(path, channels_last=True)
+    assert fast.preprocess_images(frames).is_contiguous(memory_format=torch.channels_last)
+    reference = encoder.embed_images(frames)
+    torch.testing.assert_close(fast.embed_images(frames), reference, rtol=1e-4, atol=1e-4)
+    embedded = EmbeddingTransform(fast, autocast_dtype=torch.bfloat16)(
+        TensorDict({"pixels": frames}, batch_size=[1]))
+    assert embedded["embedding"].dtype == torch.float32
+    cosine = torch.nn.functional.cosine_similarity(embedded["embedding"], reference)
+    assert (cosine > 0.99).all(), cosine
 
 
 def test_liv_is_frozen_float32_and_stays_in_eval(liv_files):

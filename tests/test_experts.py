@@ -72,6 +72,13 @@ def test_episode_without_success_runs_to_the_end():
         first_success_index(episode)
 
 
+def test_whole_episodes_are_kept_when_asked():
+    episode, = collect_expert_episodes("button-press-topdown", steps_after_success=None,
+                                       max_episode_steps=120)
+    assert len(episode) == 120 and first_success_index(episode) < 100
+    assert episode["next", "truncated"][-1].item() and not episode["next", "done"][:-1].any()
+
+
 def test_first_success_index():
     success = torch.tensor([False, False, True, False, True]).unsqueeze(-1)
     episode = TensorDict({"next": {"success": success}}, [5])
@@ -81,5 +88,7 @@ def test_first_success_index():
 def test_bad_arguments_are_refused():
     with pytest.raises(ValueError, match="noise"):
         collect_expert_episodes("push", noise=-0.1)
+    with pytest.raises(ValueError, match="steps_after_success"):
+        collect_expert_episodes("push", steps_after_success=-1)
     with pytest.raises(ValueError, match="Unknown task"):
         collect_expert_episodes("pushh")

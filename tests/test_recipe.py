@@ -84,6 +84,14 @@ def test_stage_two_preloads_positive_experts(tmp_path):
     assert state["inserted"] == 4 and state["episode"] == 2
 
 
+@pytest.mark.parametrize(("steps_after_success", "length"), [("5", None), ("null", 500)])
+def test_preloaded_experts_are_cut_or_whole(tmp_path, steps_after_success, length):
+    cfg = config(tmp_path, f"train.expert_steps_after_success={steps_after_success}")
+    episode, = utils.collect_successful_experts(cfg, encoder=None, count=1)
+    first = int(episode["next", "success"].squeeze(-1).float().argmax())
+    assert len(episode) == (first + 6 if length is None else length)
+
+
 def test_heads_are_finetuned_during_training(tmp_path):
     cfg = config(tmp_path, "reward.directional=d3", "reward.l2_margin=0.0")
     sac_temporal.train(cfg)
@@ -115,11 +123,17 @@ def test_kill_and_resume_continues_the_run(tmp_path):
 def test_resume_continues_with_the_saved_config(tmp_path, capsys):
     sac_temporal.train(config(tmp_path, "env.task=door-open", "reward.rho=0.05",
                               "train.episodes=2", "train.stop_after_episodes=1"))
+    # A run started before a config key existed resumes with the key's current default.
+    saved_config = tmp_path / "run" / "config.json"
+    saved = json.loads(saved_config.read_text())
+    del saved["train"]["expert_steps_after_success"]
+    saved_config.write_text(json.dumps(saved))
     # Only the run directory and resume=true are restated; the defaults name another task.
     summary = sac_temporal.train(config(tmp_path, "resume=true", "train.episodes=2"))
     assert summary["config"]["env"]["task"] == "door-open"
     assert summary["config"]["reward"]["rho"] == 0.05
     assert summary["ras"]["budget"] == 400  # door-open's, not drawer-open's 300
+    assert summary["config"]["train"]["expert_steps_after_success"] == 5
     assert "not using the current values of env.task" in capsys.readouterr().out
 
 
@@ -193,6 +207,7 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     ("reward.rho=-0.1", "reward.rho"), ("reward.lambda_=-1", "reward.lambda_"),
     ("reward.k=0", "reward.k"), ("train.episodes=0", "train.episodes"),
     ("logger.backend=tensorboard", "logger.backend"),
+    ("train.expert_steps_after_success=-1", "train.expert_steps_after_success"),
 ])
 def test_bad_config_stops_before_any_work(tmp_path, override, key):
     with pytest.raises(ValueError, match=key.replace(".", r"\.")):

@@ -24,7 +24,7 @@ _GOAL_SLICE = slice(36, 39)
 def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: int = 1,
                             noise: float = 0.1, render: bool = False, image_size: int = 224,
                             camera: str = "corner2", fast_render: bool = True,
-                            steps_after_success: int = 5, max_episode_steps: int = 500,
+                            steps_after_success: int | None = 5, max_episode_steps: int = 500,
                             generator_seed: int | None = None) -> list[TensorDict]:
     """Run Metaworld's scripted policy on the fixed-goal, goal-hidden task.
 
@@ -35,8 +35,9 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
     never succeeds otherwise); the stored observations stay goal-hidden, as in training.
 
     An episode is cut ``steps_after_success`` steps after its first success (Metaworld experts
-    can lose the success again later); its last step is then marked ``truncated`` and ``done``
-    so episode boundaries stay visible in a replay buffer. An episode with no success runs to
+    can lose the success again later: door-open and push do); its last step is then marked
+    ``truncated`` and ``done`` so episode boundaries stay visible in a replay buffer. With
+    ``steps_after_success=None``, and for an episode with no success, the episode runs to
     ``max_episode_steps`` and ends truncated, as any env episode does.
 
     Args:
@@ -46,7 +47,8 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
         noise: standard deviation of the action noise.
         render, image_size, camera, fast_render: as in :func:`make_env`; pass the training
             settings so the frames match the training frames.
-        steps_after_success: steps kept after the first success.
+        steps_after_success: steps kept after the first success; ``None`` keeps the whole
+            episode.
         max_episode_steps: episode length when no success happens.
         generator_seed: seed of the noise generator; ``None`` derives it from ``seed``, so the
             same call returns the same episodes.
@@ -62,10 +64,11 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
         (True, True)
     """
     spec = get_task(task)
-    if num_episodes < 0 or noise < 0 or steps_after_success < 0:
+    if num_episodes < 0 or noise < 0 or (steps_after_success or 0) < 0:
         raise ValueError(
             f"num_episodes={num_episodes}, noise={noise}, steps_after_success="
-            f"{steps_after_success}: all three must be non-negative."
+            f"{steps_after_success}: all three must be non-negative (steps_after_success may "
+            "also be None, for whole episodes)."
         )
     env = make_env(spec, seed, render=render, image_size=image_size, camera=camera,
                    fast_render=fast_render, max_episode_steps=max_episode_steps)
@@ -95,7 +98,8 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
                     first_success = t
                 if tensordict["next", "done"].item():
                     break
-                if first_success is not None and t >= first_success + steps_after_success:
+                if (steps_after_success is not None and first_success is not None
+                        and t >= first_success + steps_after_success):
                     tensordict["next", "truncated"] = torch.ones(1, dtype=torch.bool)
                     tensordict["next", "done"] = torch.ones(1, dtype=torch.bool)
                     break
