@@ -9,6 +9,7 @@ transition from the end of its episode on), then an episode row and a checkpoint
     python recipes/sac_temporal.py                                # quick default (offline, CPU)
     python recipes/sac_temporal.py preset=best protocol=stage2 env.task=door-open env.seed=2
     python recipes/sac_temporal.py output_dir=runs/x resume=true  # continue a killed run
+    python recipes/sac_temporal.py output_dir=runs/x resume=true train.episodes=2000  # extend it
 
 Outputs in ``output_dir``: ``episodes.csv`` (episode, env_steps, success, return = sum of sparse
 task rewards, mean_vlm_reward, stage), ``summary.json`` (TTFS, TT50S, RAS, throughput, the
@@ -19,10 +20,12 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Collection
 from pathlib import Path
 
 import hydra
 import torch
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 from tqdm import tqdm
@@ -48,12 +51,16 @@ STEP_KEYS = ("observation", "embedding", "action", "success", ("next", "observat
              ("next", "task_reward"), ("next", "vlm_reward"))
 
 
-def train(cfg: DictConfig) -> dict | None:
-    """Run (or resume) one training run; returns its summary, or None when stopped early."""
+def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | None:
+    """Run (or resume) one training run; returns its summary, or None when stopped early.
+
+    ``given_keys``: the keys set on the command line, which alone may change a resumed run's
+    ``train.episodes`` and the other :data:`utils.RESUMABLE_KEYS` (None: all of ``cfg``'s do).
+    """
     utils.validate_config(cfg)
     run_dir = utils.check_run_dir(cfg)
     if cfg.resume:
-        cfg = utils.resumed_config(cfg, run_dir)
+        cfg = utils.resumed_config(cfg, run_dir, given_keys)
     state = utils.load_checkpoint(run_dir) if cfg.resume else None
     torch.manual_seed(cfg.env.seed)
 
@@ -223,7 +230,7 @@ def train(cfg: DictConfig) -> dict | None:
 def main(cfg: DictConfig) -> None:
     if cfg.train.threads is not None:
         torch.set_num_threads(cfg.train.threads)
-    summary = train(cfg)
+    summary = train(cfg, given_keys=utils.override_keys(HydraConfig.get().overrides.task))
     if summary is not None:
         print({key: summary[key] for key in ("ttfs", "tt50s", "ras", "episodes", "env_steps",
                                               "steps_per_second")})

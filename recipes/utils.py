@@ -6,6 +6,7 @@ import csv
 import json
 import random
 import shutil
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -113,37 +114,61 @@ def baseline_text(cfg: DictConfig) -> str:
 def check_run_dir(cfg: DictConfig) -> Path:
     """The run directory, checked before any work: resumable, new, or replaceable."""
     run_dir = Path(cfg.output_dir)
-    if cfg.resume:
-        if not (run_dir / CHECKPOINT).exists():
-            raise FileNotFoundError(f"resume=true but {run_dir / CHECKPOINT} does not exist; "
-                                    "start the run without resume=true.")
-    elif run_dir.exists() and any(run_dir.iterdir()) and not cfg.overwrite:
-        raise FileExistsError(f"output_dir={str(run_dir)!r} already holds a run; pass "
-                              "resume=true to continue it, overwrite=true to replace it, or "
-                              "another output_dir.")
+    holds_files = run_dir.exists() and any(run_dir.iterdir())
+    checkpointed = (run_dir / CHECKPOINT).exists()
+    if cfg.resume and not checkpointed:
+        if holds_files:
+            raise FileNotFoundError(
+                f"resume=true but {run_dir / CHECKPOINT} does not exist: the run stopped before "
+                "its first checkpoint, so there is nothing to resume. Start it again with "
+                "overwrite=true instead of resume=true.")
+        raise FileNotFoundError(f"resume=true but {run_dir / CHECKPOINT} does not exist; "
+                                "start the run without resume=true.")
+    if not cfg.resume and holds_files and not cfg.overwrite:
+        if checkpointed:
+            raise FileExistsError(f"output_dir={str(run_dir)!r} already holds a run; pass "
+                                  "resume=true to continue it, overwrite=true to replace it, or "
+                                  "another output_dir.")
+        raise FileExistsError(f"output_dir={str(run_dir)!r} is not empty and holds no "
+                              f"{CHECKPOINT} to resume from; pass overwrite=true to replace its "
+                              "contents, or another output_dir.")
     return run_dir
 
 
-#: Keys a resumed run may change; every other value comes from the run's saved config.json.
-RESUMABLE_KEYS = ("resume", "overwrite", "output_dir", "train.episodes",
-                  "train.stop_after_episodes", "train.progress", "train.threads",
-                  "train.checkpoint_every")
+#: Keys about this process, not the run (where and how to resume, when to stop, the progress bar,
+#: threads): a resumed run always takes their current values.
+PROCESS_KEYS = ("resume", "overwrite", "output_dir", "train.stop_after_episodes",
+                "train.progress", "train.threads")
+#: Keys of the run a resumed run may change when they are given on the command line; every
+#: other value comes from the run's saved config.json.
+RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every")
 
 
-def resumed_config(cfg: DictConfig, run_dir: Path) -> DictConfig:
-    """The config of the run in ``run_dir``, with only :data:`RESUMABLE_KEYS` taken from ``cfg``.
+def override_keys(overrides: Sequence[str]) -> set[str]:
+    """The config keys that command-line overrides set (``+``, ``++`` and ``~`` dropped)."""
+    return {override.split("=", 1)[0].lstrip("+~") for override in overrides}
+
+
+def resumed_config(cfg: DictConfig, run_dir: Path,
+                   given_keys: Collection[str] | None = None) -> DictConfig:
+    """The config of the run in ``run_dir``, continued with ``cfg``'s :data:`PROCESS_KEYS`.
 
     A resumed run must go on with the task, encoder, reward and hyperparameters it started with,
     whatever the command line's defaults are now; so ``resume=true output_dir=...`` is enough.
-    Keys the saved config lacks (added to the recipe after the run started) take ``cfg``'s values.
+    Of :data:`RESUMABLE_KEYS`, ``cfg``'s values replace the saved ones only for ``given_keys``
+    (the keys set on the command line), or all of them when ``given_keys`` is None (a config
+    built in code). Keys the saved config lacks (added to the recipe after the run started) take
+    ``cfg``'s values.
     """
     current = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
     saved = OmegaConf.merge(current, json.loads((run_dir / "config.json").read_text()))
-    for key in RESUMABLE_KEYS:
+    applied = [*PROCESS_KEYS, *(key for key in RESUMABLE_KEYS
+                               if given_keys is None or key in given_keys)]
+    for key in applied:
         OmegaConf.update(saved, key, OmegaConf.select(cfg, key), force_add=True)
     saved_values = _flatten(saved)
     differing = [key for key, value in _flatten(cfg).items()
-                 if key not in RESUMABLE_KEYS and saved_values.get(key, value) != value]
+                 if key not in applied and saved_values.get(key, value) != value]
     if differing:
         print(f"resume: continuing with {run_dir / 'config.json'}; not using the current "
               f"values of {', '.join(differing)}")

@@ -92,6 +92,14 @@ def test_preloaded_experts_are_cut_or_whole(tmp_path, steps_after_success, lengt
     assert len(episode) == (first + 6 if length is None else length)
 
 
+def test_sac_baseline_preloads_experts_without_an_encoder(tmp_path):
+    cfg = config(tmp_path, "preset=sac", "protocol=stage2", "train.preload_positives=1",
+                 "train.episodes=1", "env.max_episode_steps=20")
+    assert (cfg.reward.positional, cfg.reward.directional) == ("none", "none")
+    assert sac_temporal.train(cfg)["episodes"] == 1
+    assert utils.load_checkpoint(tmp_path / "run")["inserted"] == 2
+
+
 def test_heads_are_finetuned_during_training(tmp_path):
     cfg = config(tmp_path, "reward.directional=d3", "reward.l2_margin=0.0")
     sac_temporal.train(cfg)
@@ -137,6 +145,30 @@ def test_resume_continues_with_the_saved_config(tmp_path, capsys):
     assert "not using the current values of env.task" in capsys.readouterr().out
 
 
+def test_resume_changes_only_the_resumable_keys_given(tmp_path, capsys):
+    sac_temporal.train(config(tmp_path, "train.episodes=6", "train.stop_after_episodes=1"))
+    run_dir = tmp_path / "run"
+    # On the command line: `resume=true output_dir=...` restates neither value.
+    cfg = config(tmp_path, "resume=true", "train.episodes=3", "train.checkpoint_every=2")
+    resumed = utils.resumed_config(cfg, run_dir, utils.override_keys(
+        ["resume=true", f"output_dir={run_dir}", "+train.checkpoint_every=2"]))
+    assert resumed.train.episodes == 6 and resumed.train.checkpoint_every == 2
+    assert resumed.resume and resumed.train.stop_after_episodes is None
+    assert "not using the current values of train.episodes" in capsys.readouterr().out
+    # A config built in code means all of its values.
+    assert utils.resumed_config(cfg, run_dir).train.episodes == 3
+
+
+def test_run_stopped_before_its_first_checkpoint_is_replaced_not_resumed(tmp_path):
+    (tmp_path / "run" / "replay").mkdir(parents=True)
+    with pytest.raises(FileNotFoundError, match="overwrite=true instead of resume=true"):
+        sac_temporal.train(config(tmp_path, "resume=true"))
+    with pytest.raises(FileExistsError, match="holds no checkpoint.pt") as error:
+        sac_temporal.train(config(tmp_path))
+    assert "resume=true" not in str(error.value)
+    assert sac_temporal.train(config(tmp_path, "overwrite=true"))["episodes"] == 3
+
+
 @pytest.mark.slow
 def test_killed_process_resumes(tmp_path):
     """A real SIGKILL in the middle of an episode, then resume=true in a new process."""
@@ -158,12 +190,22 @@ def test_killed_process_resumes(tmp_path):
     process.wait()
     done = utils.load_checkpoint(run_dir)["episode"]
     assert done >= 2
-    finished = subprocess.run([*args, f"train.episodes={done + 1}", "resume=true"],
+    # The README's command: nothing restated, so the run keeps its own 1,000 episodes (here it
+    # is stopped one episode later, as if killed again, without writing a summary).
+    resumed = subprocess.run([sys.executable, str(RECIPES / "sac_temporal.py"),
+                              f"output_dir={run_dir}", "resume=true",
+                              f"train.stop_after_episodes={done + 1}", "train.progress=false"],
+                             capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert not (run_dir / "summary.json").exists()
+    # A train.episodes given on the command line ends the run there.
+    finished = subprocess.run([*args, f"train.episodes={done + 2}", "resume=true"],
                               capture_output=True, text=True, timeout=300)
     assert finished.returncode == 0, finished.stderr[-2000:]
     rows = episode_rows(run_dir)
-    assert [int(row["episode"]) for row in rows] == list(range(1, done + 2))
-    assert [int(row["env_steps"]) for row in rows] == [20 * i for i in range(1, done + 2)]
+    assert [int(row["episode"]) for row in rows] == list(range(1, done + 3))
+    assert [int(row["env_steps"]) for row in rows] == [20 * i for i in range(1, done + 3)]
+    assert json.loads((run_dir / "summary.json").read_text())["episodes"] == done + 2
 
 
 @pytest.mark.slow

@@ -142,3 +142,12 @@ def test_memory_at_500k_transitions_is_under_budget():
     per_row = buffer.memory_bytes() / capacity
     rows = 1000 * 501
     assert per_row * rows < 1.2e9, per_row
+
+
+def test_episodes_must_carry_the_same_keys():
+    buffer = EpisodeReplayBuffer(capacity=50, history=2)
+    buffer.extend(make_episode(0, 5).exclude("embedding", ("next", "embedding")))
+    batch = buffer.sample(4)
+    assert "embedding" not in batch["next"].keys() and batch["next", "observation"].shape == (4, 39)
+    with pytest.raises(ValueError, match="same encoder, or none of them"):
+        buffer.extend(make_episode(1, 5))

@@ -55,7 +55,8 @@ def preload_experts(buffer: EpisodeReplayBuffer, episodes: list[TensorDictBase],
                     encoder: Encoder | None = None) -> list[TensorDict]:
     """Insert expert episodes (stage 2's preloaded positives); returns their compact rows.
 
-    Episodes without embeddings are embedded with ``encoder``. They are labelled by the same
+    Episodes without embeddings are embedded with ``encoder``; with no encoder they are stored as
+    they are (observations only, as for SAC without a VLM reward). They are labelled by the same
     rule as training episodes (:func:`~temporal_torchrl.data.episode_labels`): a successful expert
     episode, cut a few steps after its first success, is positive up to its first success and
     through the success steps right after it (steps after success flips back off, as it can in
@@ -63,9 +64,7 @@ def preload_experts(buffer: EpisodeReplayBuffer, episodes: list[TensorDictBase],
     """
     rows = []
     for episode in episodes:
-        if "embedding" not in episode.keys():
-            if encoder is None:
-                raise ValueError("expert episodes without embeddings need the encoder.")
+        if "embedding" not in episode.keys() and encoder is not None:
             episode = embed_episode(episode, encoder)
         rows.append(buffer.extend(episode))
     return rows

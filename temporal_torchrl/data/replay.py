@@ -163,6 +163,13 @@ class EpisodeReplayBuffer:
         if length > self.capacity:
             raise ValueError(f"an episode of {length} rows does not fit in capacity="
                              f"{self.capacity}; raise the buffer capacity.")
+        if self._storage.initialized:
+            stored = set(self._storage._storage.keys()) - {"episode", "valid"}
+            if set(rows.keys()) != stored:
+                raise ValueError(
+                    f"an episode with keys {sorted(rows.keys())} does not match the buffer's "
+                    f"{sorted(stored)}; every episode must carry the same keys (embed all of "
+                    "them with the same encoder, or none of them).")
         start = self._cursor if self._cursor + length <= self.capacity else 0
         self._invalidate_overlapping(start, start + length)
         episode_id = self._next_episode
