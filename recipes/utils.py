@@ -6,7 +6,7 @@ import csv
 import json
 import random
 import shutil
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -51,12 +51,61 @@ def _none(value: Any) -> str | None:
     return None if value is None or str(value).lower() == "none" else str(value)
 
 
+def _integer(minimum: int) -> tuple[Callable[[Any], bool], str]:
+    return (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= minimum,
+            f"an integer >= {minimum}")
+
+
+def _number(test: Callable[[float], bool], expected: str) -> tuple[Callable[[Any], bool], str]:
+    return (lambda v: isinstance(v, int | float) and not isinstance(v, bool) and test(v),
+            expected)
+
+
+#: (key, check, what is expected, whether null is allowed) for the numeric settings.
+_NUMERIC_CHECKS = (
+    ("env.max_episode_steps", *_integer(1), False),
+    ("reward.rho", *_number(lambda v: v >= 0, "a number >= 0"), False),
+    ("reward.lambda_", *_number(lambda v: v >= 0, "a number >= 0"), False),
+    ("reward.k", *_integer(1), False),
+    ("reward.alpha", *_number(lambda v: 0 <= v <= 1, "a number in [0, 1]"), False),
+    ("reward.delta", *_number(lambda v: v >= 0, "a number >= 0"), False),
+    ("reward.l2_margin", *_number(lambda v: v >= 0, "a number >= 0"), False),
+    ("reward.gap", *_integer(1), False),
+    ("reward.batch_size", *_integer(1), False),
+    ("reward.lr", *_number(lambda v: v > 0, "a number > 0"), False),
+    ("reward.label_window", *_integer(1), True),
+    ("sac.batch_size", *_integer(1), False),
+    ("sac.lr", *_number(lambda v: v > 0, "a number > 0"), False),
+    ("sac.gamma", *_number(lambda v: 0 < v <= 1, "a number in (0, 1]"), False),
+    ("sac.tau", *_number(lambda v: 0 < v <= 1, "a number in (0, 1]"), False),
+    ("sac.alpha_init", *_number(lambda v: v > 0, "a number > 0"), False),
+    ("sac.target_entropy", *_number(lambda v: True, "a number"), True),
+    ("train.episodes", *_integer(1), False),
+    ("train.preload_positives", *_integer(0), False),
+    ("train.expert_steps_after_success", *_integer(0), True),
+    ("train.random_steps", *_integer(0), False),
+    ("train.updates_per_step", *_integer(0), False),
+    ("train.reward_updates_per_step", *_integer(0), False),
+    ("train.checkpoint_every", *_integer(1), False),
+    ("train.stop_after_episodes", *_integer(1), True),
+    ("train.threads", *_integer(1), True),
+)
+_GROUPS = ("env", "encoder", "reward", "sac", "replay_buffer", "train", "logger")
+EMBEDDING_DTYPES = ("float16", "bfloat16", "float32")
+
+
 def validate_config(cfg: DictConfig) -> None:
     """Stop before any work on a bad value, naming the config key (ValueError)."""
     def bad(key: str, value: Any, expected: str) -> ValueError:
         return ValueError(f"config {key}={value!r} is invalid: expected {expected}. "
                           f"Fix it on the command line, e.g. {key}=<value>.")
 
+    for group in _GROUPS:
+        value = cfg.get(group)
+        if not isinstance(value, DictConfig):
+            hint = (f"did you mean encoder.name={value}?" if group == "encoder" else
+                    f"set its keys one by one, e.g. {group}.<key>=<value>")
+            raise bad(group, value, f"a group of settings ({hint})")
     if cfg.env.task not in TASKS:
         raise bad("env.task", cfg.env.task, "a Metaworld MT50 task name such as "
                   f"drawer-open ({len(TASKS)} known: see temporal_torchrl.envs.TASKS)")
@@ -69,32 +118,38 @@ def validate_config(cfg: DictConfig) -> None:
     if directional is not None and directional not in DIRECTIONAL:
         raise bad("reward.directional", cfg.reward.directional,
                   f"none or one of {', '.join(DIRECTIONAL)}")
-    checks = (
-        ("reward.rho", cfg.reward.rho, lambda v: v >= 0, "a number >= 0"),
-        ("reward.lambda_", cfg.reward.lambda_, lambda v: v >= 0, "a number >= 0"),
-        ("reward.k", cfg.reward.k, lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
-        ("reward.alpha", cfg.reward.alpha, lambda v: 0 <= v <= 1, "a number in [0, 1]"),
-        ("train.episodes", cfg.train.episodes, lambda v: isinstance(v, int) and v >= 1,
-         "an integer >= 1"),
-        ("train.preload_positives", cfg.train.preload_positives,
-         lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
-        ("train.random_steps", cfg.train.random_steps, lambda v: isinstance(v, int) and v >= 0,
-         "an integer >= 0"),
-        ("train.expert_steps_after_success", 0 if cfg.train.expert_steps_after_success is None
-         else cfg.train.expert_steps_after_success, lambda v: isinstance(v, int) and v >= 0,
-         "an integer >= 0, or null for whole expert episodes"),
-        ("env.max_episode_steps", cfg.env.max_episode_steps,
-         lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
-        ("train.checkpoint_every", cfg.train.checkpoint_every,
-         lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
-    )
-    for key, value, ok, expected in checks:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not ok(value):
-            raise bad(key, value, expected)
+    for key, ok, expected, nullable in _NUMERIC_CHECKS:
+        value = OmegaConf.select(cfg, key)
+        if not (value is None and nullable) and not ok(value):
+            raise bad(key, value, expected + (", or null" if nullable else ""))
+    hidden = cfg.sac.hidden_sizes
+    if not hidden or not all(_integer(1)[0](size) for size in hidden):
+        raise bad("sac.hidden_sizes", hidden, "a list of integers >= 1, e.g. [256,256]")
+    if cfg.replay_buffer.embedding_dtype not in EMBEDDING_DTYPES:
+        raise bad("replay_buffer.embedding_dtype", cfg.replay_buffer.embedding_dtype,
+                  f"one of {', '.join(EMBEDDING_DTYPES)}")
+    longest = max(cfg.env.max_episode_steps, 500 if cfg.train.preload_positives else 0) + 1
+    capacity = cfg.replay_buffer.capacity
+    if capacity is not None and not (_integer(longest)[0](capacity)):
+        raise bad("replay_buffer.capacity", capacity,
+                  f"null (the whole run) or an integer >= {longest}, the rows of the longest "
+                  "episode (its steps + 1; preloaded experts run up to 500 steps)")
+    try:
+        device = torch.device(cfg.encoder.device)
+    except (RuntimeError, TypeError) as error:
+        raise bad("encoder.device", cfg.encoder.device, "a torch device such as cpu or "
+                  "cuda:0") from error
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise bad("encoder.device", cfg.encoder.device,
+                  "cpu: torch finds no CUDA GPU on this machine")
     if cfg.logger.backend not in LOGGER_BACKENDS:
         raise bad("logger.backend", cfg.logger.backend, f"one of {', '.join(LOGGER_BACKENDS)}")
     if not isinstance(cfg.reward.baseline, str) or not cfg.reward.baseline.strip():
         raise bad("reward.baseline", cfg.reward.baseline, "generic, tailored or a text")
+    if cfg.reward.baseline == "tailored" and get_task(cfg.env.task).tailored_baseline is None:
+        raise bad("reward.baseline", "tailored",
+                  f"generic or a text: {cfg.env.task} has no tailored baseline (only the thesis's "
+                  "six evaluation tasks have one)")
 
 
 def uses_vlm_reward(cfg: DictConfig) -> bool:

@@ -250,10 +250,19 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     ("reward.k=0", "reward.k"), ("train.episodes=0", "train.episodes"),
     ("logger.backend=tensorboard", "logger.backend"),
     ("train.expert_steps_after_success=-1", "train.expert_steps_after_success"),
+    ("encoder=state", "did you mean encoder.name=state"), ("sac.batch_size=0", "sac.batch_size"),
+    ("train.updates_per_step=-1", "train.updates_per_step"),
+    ("replay_buffer.capacity=10", "replay_buffer.capacity"),
+    ("replay_buffer.embedding_dtype=float8", "replay_buffer.embedding_dtype"),
+    ("sac.hidden_sizes=[]", "sac.hidden_sizes"), ("sac.gamma=1.5", "sac.gamma"),
+    ("encoder.device=gpu", "encoder.device"),
+    pytest.param("encoder.device=cuda", "no CUDA GPU", marks=pytest.mark.skipif(
+        torch.cuda.is_available(), reason="needs a machine without CUDA")),
+    ("env.task=reach reward.baseline=tailored", "reach has no tailored baseline"),
 ])
 def test_bad_config_stops_before_any_work(tmp_path, override, key):
     with pytest.raises(ValueError, match=key.replace(".", r"\.")):
-        sac_temporal.train(config(tmp_path, override))
+        sac_temporal.train(config(tmp_path, *override.split()))
     assert not (tmp_path / "run").exists()
 
 
