@@ -125,11 +125,11 @@ def main() -> None:
         tmp = Path(tmp)
         # 1. whole loop, state encoder
         episodes, length = (3, 100) if quick else (4, 250)
-        cfg = recipe_config(tmp / "state", f"train.episodes={episodes}",
+        cfg = recipe_config(tmp / "state", "encoder.name=state", f"train.episodes={episodes}",
                             f"env.max_episode_steps={length}")
         summary = sac_temporal.train(cfg)
         reference = plain_sac_steps_per_second(cfg, episodes)
-        rows.append({"measure": "whole loop, state encoder (env steps/s)",
+        rows.append({"measure": "whole loop, state encoder, FuRL + D3, D=1024 (env steps/s)",
                      "project": summary["steps_per_second"],
                      "reference": reference, "reference is": "plain TorchRL SAC loop",
                      "ratio": summary["steps_per_second"] / reference})
@@ -151,7 +151,8 @@ def main() -> None:
         save_random_liv_checkpoint(checkpoint)
         length = 10 if quick else 30
         cfg = recipe_config(tmp / "liv", "encoder.name=liv", f"encoder.checkpoint={checkpoint}",
-                            "train.episodes=2", f"env.max_episode_steps={length}")
+                            "env.image_size=256", "train.episodes=2",
+                            f"env.max_episode_steps={length}")
         summary = sac_temporal.train(cfg)
         reference = pipeline_steps_per_second(cfg, length)
         rows.append({"measure": "whole loop, render 256px + LIV RN50 (env steps/s)",

@@ -57,10 +57,12 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     ``given_keys``: the keys set on the command line, which alone may change a resumed run's
     ``train.episodes`` and the other :data:`utils.RESUMABLE_KEYS` (None: all of ``cfg``'s do).
     """
+    utils.import_reward_modules(cfg.reward.modules)
     utils.validate_config(cfg)
     run_dir = utils.check_run_dir(cfg)
     if cfg.resume:
         cfg = utils.resumed_config(cfg, run_dir, given_keys)
+        utils.import_reward_modules(cfg.reward.modules)
     state = utils.load_checkpoint(run_dir) if cfg.resume else None
     torch.manual_seed(cfg.env.seed)
 

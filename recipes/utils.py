@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import csv
+import importlib
+import importlib.util
 import json
 import random
+import re
 import shutil
+import sys
 from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import Any
@@ -94,6 +98,39 @@ _GROUPS = ("env", "encoder", "reward", "sac", "replay_buffer", "train", "logger"
 EMBEDDING_DTYPES = ("float16", "bfloat16", "float32")
 
 
+def import_reward_modules(modules: Sequence[str]) -> None:
+    """Import ``reward.modules``: module names or ``.py`` files that call ``register_reward``.
+
+    Each is imported once per process, so a resumed run may import its saved list again.
+    """
+    if isinstance(modules, str) or not all(isinstance(module, str) for module in modules):
+        raise ValueError(f"config reward.modules={modules!r} is invalid: expected a list of "
+                         "module names or .py files, e.g. reward.modules=[my_rewards.py].")
+    for module in modules:
+        if module.endswith(".py"):
+            path = Path(module).resolve()
+            if not path.is_file():
+                raise FileNotFoundError(f"config reward.modules: {module!r} is not a file; pass "
+                                        "the path of a .py file that registers rewards.")
+            name = "reward_module_" + re.sub(r"\W", "_", str(path))
+            if name not in sys.modules:
+                spec = importlib.util.spec_from_file_location(name, path)
+                loaded = importlib.util.module_from_spec(spec)
+                sys.modules[name] = loaded
+                try:
+                    spec.loader.exec_module(loaded)
+                except BaseException:
+                    del sys.modules[name]
+                    raise
+        else:
+            try:
+                importlib.import_module(module)
+            except ModuleNotFoundError as error:
+                raise ValueError(f"config reward.modules: cannot import {module!r} ({error}); "
+                                 "pass a module on PYTHONPATH or the path of a .py file."
+                                 ) from error
+
+
 def validate_config(cfg: DictConfig) -> None:
     """Stop before any work on a bad value, naming the config key (ValueError)."""
     def bad(key: str, value: Any, expected: str) -> ValueError:
@@ -114,10 +151,12 @@ def validate_config(cfg: DictConfig) -> None:
     positional, directional = _none(cfg.reward.positional), _none(cfg.reward.directional)
     if positional is not None and positional not in POSITIONAL:
         raise bad("reward.positional", cfg.reward.positional,
-                  f"none or one of {', '.join(POSITIONAL)}")
+                  f"none or one of {', '.join(POSITIONAL)} (your own: register_reward in a "
+                  "module listed in reward.modules)")
     if directional is not None and directional not in DIRECTIONAL:
         raise bad("reward.directional", cfg.reward.directional,
-                  f"none or one of {', '.join(DIRECTIONAL)}")
+                  f"none or one of {', '.join(DIRECTIONAL)} (your own: register_reward in a "
+                  "module listed in reward.modules)")
     for key, ok, expected, nullable in _NUMERIC_CHECKS:
         value = OmegaConf.select(cfg, key)
         if not (value is None and nullable) and not ok(value):

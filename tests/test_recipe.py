@@ -100,6 +100,39 @@ def test_sac_baseline_preloads_experts_without_an_encoder(tmp_path):
     assert utils.load_checkpoint(tmp_path / "run")["inserted"] == 2
 
 
+USER_REWARD = """
+from temporal_torchrl.rewards import cosine_similarity, register_reward
+
+
+def towards_goal_since_start(heads, s, *, g, s0=None, **unused):
+    return cosine_similarity(heads.image(s) - heads.image(s0), heads.text(g))
+
+
+register_reward("user_p5", towards_goal_since_start, kind="positional")
+"""
+
+
+def test_a_reward_from_reward_modules_trains_and_resumes(tmp_path):
+    from temporal_torchrl.rewards import POSITIONAL, unregister_reward
+
+    module = tmp_path / "my_rewards.py"
+    module.write_text(USER_REWARD)
+    overrides = [f"reward.modules=[{module}]", "reward.positional=user_p5",
+                 "reward.directional=none"]
+    try:
+        sac_temporal.train(config(tmp_path, *overrides, "train.stop_after_episodes=1"))
+        assert "user_p5" in POSITIONAL
+        # The saved config names the module, so a plain resume imports it (once) again.
+        assert sac_temporal.train(config(tmp_path, "resume=true"))["episodes"] == 3
+        assert float(episode_rows(tmp_path / "run")[-1]["mean_vlm_reward"]) != 0.0
+    finally:
+        unregister_reward("user_p5")
+    with pytest.raises(ValueError, match="reward.modules"):
+        sac_temporal.train(config(tmp_path, "reward.positional=user_p6"))
+    with pytest.raises(FileNotFoundError, match="reward.modules"):
+        sac_temporal.train(config(tmp_path, f"reward.modules=[{tmp_path / 'missing.py'}]"))
+
+
 def test_heads_are_finetuned_during_training(tmp_path):
     cfg = config(tmp_path, "reward.directional=d3", "reward.l2_margin=0.0")
     sac_temporal.train(cfg)

@@ -6,10 +6,14 @@ import torch
 
 from temporal_torchrl.rewards import (
     DIRECTIONAL,
+    IMAGE_INPUTS,
     POSITIONAL,
     RewardHeads,
     TemporalReward,
+    cosine_similarity,
     heads_input_dims,
+    register_reward,
+    unregister_reward,
 )
 
 D, HIDDEN, OUT, BATCH, ALPHA = 5, 7, 3, 4, 0.4
@@ -295,3 +299,108 @@ def test_embedding_size_mismatch_names_both_sizes():
     with pytest.raises(ValueError, match="size 9.*embedding_dim=5"):
         reward(torch.randn(2, 9), torch.randn(2, 9), torch.randn(2, 9),
                torch.zeros(2, 1, dtype=torch.bool))
+
+
+# --- register_reward ----------------------------------------------------------------------------
+
+@pytest.fixture
+def registry():
+    """Yields the register function; removes every name it added, so other tests see built-ins."""
+    added = []
+
+    def register(name, function, **kwargs):
+        register_reward(name, function, **kwargs)
+        added.append(name)
+
+    yield register
+    for name in added:
+        if name in IMAGE_INPUTS:
+            unregister_reward(name)
+
+
+def toy_positional(heads, s, *, g, **unused):
+    return cosine_similarity(heads.image(s), heads.text(g)) ** 2
+
+
+def toy_directional(heads, s, *, s_prev, g, b, position=None, **unused):
+    position = s if position is None else position
+    position, direction = torch.broadcast_tensors(position, s - s_prev)
+    return cosine_similarity(heads.image(torch.cat((position, direction), -1)), heads.text(g - b))
+
+
+def test_registered_rewards_build_heads_and_compute(registry, embeddings):
+    s, s0, s_prev, _, _, _ = embeddings
+    registry("p5", toy_positional, kind="positional")
+    registry("d6", toy_directional, kind="directional", image_input="concatenated")
+    assert POSITIONAL["p5"] is toy_positional and DIRECTIONAL["d6"] is toy_directional
+    assert heads_input_dims("p5", 16) == (16, 16) and heads_input_dims("d6", 16) == (32, 16)
+    reward = _temporal(positional="p5", directional="d6", rho=0.5, lambda_=2.0)
+    assert reward.positional_heads.image_dim == D and reward.positional_heads.text_dim == D
+    assert reward.directional_heads.image_dim == 2 * D and reward.directional_heads.text_dim == D
+    out = reward(s, s0, s_prev, torch.zeros(BATCH, 1, dtype=torch.bool))
+    g, b = reward.goal_embedding, reward.baseline_embedding
+    r_p = toy_positional(reward.positional_heads, s, g=g)
+    r_d = toy_directional(reward.directional_heads, s, s_prev=s_prev, g=g, b=b)
+    torch.testing.assert_close(out["positional_reward"].squeeze(-1), r_p)
+    torch.testing.assert_close(out["directional_reward"].squeeze(-1), r_d)
+    torch.testing.assert_close(out["reward"].squeeze(-1), -1 + 0.5 * (r_p + 2.0 * r_d))
+
+
+def test_zero_shot_registration_has_no_heads(registry, embeddings):
+    s, s0, s_prev, _, _, _ = embeddings
+    registry("liv2", lambda heads, s, *, g, **unused: -cosine_similarity(s, g),
+             kind="positional", image_input=None)
+    reward = _temporal(positional="liv2")
+    assert reward.positional_heads is None
+    out = reward(s, s0, s_prev, torch.zeros(BATCH, 1, dtype=torch.bool))
+    torch.testing.assert_close(out["positional_reward"].squeeze(-1),
+                               -torch.cosine_similarity(s, reward.goal_embedding, dim=-1))
+    with pytest.raises(ValueError, match="'liv2' is zero-shot"):
+        heads_input_dims("liv2", 8)
+
+
+def test_overwrite_replaces_and_may_change_kind(registry):
+    registry("p5", toy_positional, kind="positional")
+    with pytest.raises(ValueError, match="'p5' is already registered.*overwrite=True"):
+        register_reward("p5", toy_positional, kind="positional")
+    with pytest.raises(ValueError, match="'furl' is already registered"):
+        register_reward("furl", toy_positional, kind="positional")
+    registry("p5", toy_directional, kind="directional", image_input="concatenated",
+             overwrite=True)
+    assert "p5" not in POSITIONAL and DIRECTIONAL["p5"] is toy_directional
+    assert heads_input_dims("p5", 4) == (8, 4)
+    unregister_reward("p5")
+    assert "p5" not in DIRECTIONAL and "p5" not in IMAGE_INPUTS
+    with pytest.raises(ValueError, match="no reward 'p5' is registered"):
+        unregister_reward("p5")
+
+
+@pytest.mark.parametrize(("args", "kwargs", "message"), [
+    (("p5", toy_positional), {"kind": "spatial"}, "kind='spatial'; expected 'positional'"),
+    (("p5", toy_positional), {"kind": "positional", "image_input": "stacked"},
+     "image_input='stacked'; expected 'embedding'.*'concatenated'.*None"),
+    (("p5", "not a function"), {"kind": "positional"}, "is not callable"),
+    (("p5", lambda heads, s: s.sum(-1)), {"kind": "positional"},
+     "cannot be called the way rewards are.*expected fn\\(heads, s, \\*, g, b"),
+    (("", toy_positional), {"kind": "positional"}, "name=''; expected a non-empty string"),
+    ((5, toy_positional), {"kind": "positional"}, "name=5; expected a non-empty string"),
+    (("None", toy_positional), {"kind": "positional"}, "name='None' is reserved"),
+])
+def test_register_reward_refuses_bad_input(args, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        register_reward(*args, **kwargs)
+    assert "p5" not in IMAGE_INPUTS and "p5" not in POSITIONAL
+
+
+def test_assigning_to_the_dict_directly_says_how_to_register(monkeypatch):
+    monkeypatch.setitem(POSITIONAL, "p5", toy_positional)
+    with pytest.raises(ValueError, match="'p5' is in POSITIONAL but has no head layout.*"
+                                         "register_reward\\('p5'"):
+        _temporal(positional="p5")
+
+
+def test_builtins_are_registered_with_their_layouts():
+    assert [name for name, layout in IMAGE_INPUTS.items() if layout is None] == ["liv"]
+    assert [name for name, layout in IMAGE_INPUTS.items() if layout == "concatenated"] == [
+        "d3", "d4", "d5"]
+    assert set(IMAGE_INPUTS) == {*POSITIONAL, *DIRECTIONAL}

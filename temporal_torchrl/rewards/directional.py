@@ -23,12 +23,13 @@ from torch import Tensor
 
 from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.positional import (
-    RewardFunction,
     _required,
     cosine_similarity,
     goal_baseline_regularise,
     unit,
 )
+from temporal_torchrl.rewards.registry import DIRECTIONAL as DIRECTIONAL
+from temporal_torchrl.rewards.registry import register_reward
 
 
 def d1(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor, b: Tensor,
@@ -103,5 +104,9 @@ def d5(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor
     return _concatenated(heads, regularised, s - s_prev, g, b)
 
 
-#: Directional reward functions by variant name.
-DIRECTIONAL: dict[str, RewardFunction] = {"d1": d1, "d2": d2, "d3": d3, "d4": d4, "d5": d5}
+# The built-in directional rewards, into DIRECTIONAL; d3-d5 read position ⊕ direction (2·D).
+register_reward("d1", d1, kind="directional", image_input="embedding")
+register_reward("d2", d2, kind="directional", image_input="embedding")
+register_reward("d3", d3, kind="directional", image_input="concatenated")
+register_reward("d4", d4, kind="directional", image_input="concatenated")
+register_reward("d5", d5, kind="directional", image_input="concatenated")

@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from torch import nn
 
-#: Variants whose image head reads the concatenation of a position part and a direction part.
-CONCATENATED_VARIANTS = ("d3", "d4", "d5")
-#: Variants with trainable heads (``"liv"`` is zero-shot and has none).
-HEADED_VARIANTS = ("furl", "p1", "p2", "p3", "p4", "d1", "d2", "d3", "d4", "d5")
+from temporal_torchrl.rewards.registry import IMAGE_INPUTS, image_input_of
 
 
 def _mlp(in_dim: int, hidden_dim: int, out_dim: int) -> nn.Sequential:
@@ -51,21 +48,24 @@ class RewardHeads(nn.Module):
 
 
 def heads_input_dims(variant: str, embedding_dim: int) -> tuple[int, int]:
-    """Input sizes ``(image_dim, text_dim)`` of the heads for a reward variant.
+    """Input sizes ``(image_dim, text_dim)`` of the heads for a registered reward variant.
 
-    D3-D5 feed the image head the concatenation of the normalised position part and the
-    normalised direction part (thesis 4.3.2), so their image input is ``2 * embedding_dim``; every
-    other head reads one embedding (or a difference of two), ``embedding_dim`` long.
+    The image input follows the layout the variant was registered with
+    (:func:`~temporal_torchrl.rewards.register_reward`): ``"concatenated"`` variants (D3-D5) feed
+    the image head the normalised position part and the normalised direction part (thesis
+    4.3.2), ``2 * embedding_dim`` long; ``"embedding"`` variants read one embedding (or a
+    difference of two), ``embedding_dim`` long. The text head always reads ``embedding_dim``.
 
     Raises:
-        ValueError: for ``"liv"`` (zero-shot, no heads) or an unknown variant.
+        ValueError: for a zero-shot variant (``"liv"``: no heads) or an unknown variant.
     """
     if not isinstance(embedding_dim, int) or embedding_dim < 1:
         raise ValueError(f"embedding_dim={embedding_dim!r}; expected a positive integer.")
-    if variant not in HEADED_VARIANTS:
-        hint = " ('liv' is zero-shot and has no heads)" if variant == "liv" else ""
-        raise ValueError(
-            f"Unknown reward variant with heads {variant!r}{hint}; "
-            f"expected one of {', '.join(HEADED_VARIANTS)}.")
-    image_dim = 2 * embedding_dim if variant in CONCATENATED_VARIANTS else embedding_dim
+    layout = image_input_of(variant)  # Raises for an unknown or unregistered name.
+    if layout is None:
+        headed = [name for name, value in IMAGE_INPUTS.items() if value is not None]
+        raise ValueError(f"Reward variant {variant!r} is zero-shot (registered with "
+                         f"image_input=None) and has no heads; variants with heads: "
+                         f"{', '.join(headed)}.")
+    image_dim = 2 * embedding_dim if layout == "concatenated" else embedding_dim
     return image_dim, embedding_dim

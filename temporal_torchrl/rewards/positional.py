@@ -30,18 +30,17 @@ orthogonal to L is what makes the regularised reward differ from csim.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 from torch import Tensor
 
 from temporal_torchrl.rewards.heads import RewardHeads
+from temporal_torchrl.rewards.registry import POSITIONAL as POSITIONAL
+from temporal_torchrl.rewards.registry import RewardFunction as RewardFunction
+from temporal_torchrl.rewards.registry import register_reward
 
 #: Floor on vector norms in every normalisation (zero vectors map to zero, not NaN).
 EPS = 1e-8
 #: Goal-baseline projection forms; see the module docstring.
 PROJECTIONS = ("origin", "line")
-
-RewardFunction = Callable[..., Tensor]
 
 
 def unit(x: Tensor) -> Tensor:
@@ -152,7 +151,10 @@ def p4(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.
     return _half_squared_distance_reward(unit(heads.image(regularised)), unit(heads.text(g)))
 
 
-#: Positional reward functions by variant name.
-POSITIONAL: dict[str, RewardFunction] = {
-    "liv": liv, "furl": furl, "p1": p1, "p2": p2, "p3": p3, "p4": p4,
-}
+# The built-in positional rewards, into POSITIONAL (liv is zero-shot: no heads).
+register_reward("liv", liv, kind="positional", image_input=None)
+register_reward("furl", furl, kind="positional", image_input="embedding")
+register_reward("p1", p1, kind="positional", image_input="embedding")
+register_reward("p2", p2, kind="positional", image_input="embedding")
+register_reward("p3", p3, kind="positional", image_input="embedding")
+register_reward("p4", p4, kind="positional", image_input="embedding")

@@ -8,6 +8,7 @@ from torch import Tensor, nn
 from temporal_torchrl.rewards.directional import DIRECTIONAL
 from temporal_torchrl.rewards.heads import RewardHeads, heads_input_dims
 from temporal_torchrl.rewards.positional import POSITIONAL, PROJECTIONS
+from temporal_torchrl.rewards.registry import image_input_of
 
 REWARD_KEYS = ("task_reward", "positional_reward", "directional_reward", "vlm_reward", "reward")
 
@@ -21,8 +22,10 @@ class TemporalReward(nn.Module):
         embedding_dim: size D of the image and text embeddings.
         goal_embedding: g, the goal text embedding ``[D]``.
         baseline_embedding: b, the baseline text embedding ``[D]``.
-        positional: a key of :data:`POSITIONAL` (``"furl"``, ``"p1"``-``"p4"``, ``"liv"``) or None.
-        directional: a key of :data:`DIRECTIONAL` (``"d1"``-``"d5"``) or None.
+        positional: a key of :data:`POSITIONAL` (``"furl"``, ``"p1"``-``"p4"``, ``"liv"``, or one
+            added with :func:`~temporal_torchrl.rewards.register_reward`) or None.
+        directional: a key of :data:`DIRECTIONAL` (``"d1"``-``"d5"``, or one added with
+            :func:`~temporal_torchrl.rewards.register_reward`) or None.
         rho: weight of the VLM reward (>= 0; FuRL's default 0.05).
         lambda_: weight of the directional reward relative to the positional one (>= 0).
         k: history offset of s_{t-k} (>= 1). Carried here as configuration: the history transform
@@ -34,7 +37,8 @@ class TemporalReward(nn.Module):
 
     Attributes:
         positional_heads, directional_heads: the trainable :class:`RewardHeads` (f^P, f^D), or None
-            when that part is absent (and for the zero-shot ``"liv"``).
+            when that part is absent or zero-shot (registered with ``image_input=None``, like
+            ``"liv"``).
 
     Example:
         >>> import torch
@@ -57,10 +61,12 @@ class TemporalReward(nn.Module):
             raise ValueError(f"embedding_dim={embedding_dim!r}; expected a positive integer.")
         if positional is not None and positional not in POSITIONAL:
             raise ValueError(f"Unknown positional reward {positional!r}; expected one of "
-                             f"{', '.join(POSITIONAL)} or None.")
+                             f"{', '.join(POSITIONAL)} or None; add a new one with "
+                             "register_reward(name, fn, kind='positional').")
         if directional is not None and directional not in DIRECTIONAL:
             raise ValueError(f"Unknown directional reward {directional!r}; expected one of "
-                             f"{', '.join(DIRECTIONAL)} or None.")
+                             f"{', '.join(DIRECTIONAL)} or None; add a new one with "
+                             "register_reward(name, fn, kind='directional').")
         if not rho >= 0:
             raise ValueError(f"rho={rho!r}; expected rho >= 0 (the weight of the VLM reward).")
         if not lambda_ >= 0:
@@ -85,12 +91,14 @@ class TemporalReward(nn.Module):
         self.register_buffer("goal_embedding", self._text_embedding(goal_embedding, "goal"))
         self.register_buffer("baseline_embedding",
                              self._text_embedding(baseline_embedding, "baseline"))
-        self.positional_heads = (
-            RewardHeads(*heads_input_dims(positional, embedding_dim))
-            if positional not in (None, "liv") else None)
-        self.directional_heads = (
-            RewardHeads(*heads_input_dims(directional, embedding_dim))
-            if directional is not None else None)
+        self.positional_heads = self._heads(positional)
+        self.directional_heads = self._heads(directional)
+
+    def _heads(self, variant: str | None) -> RewardHeads | None:
+        """Heads sized by the variant's registered image input; None if absent or zero-shot."""
+        if variant is None or image_input_of(variant) is None:
+            return None
+        return RewardHeads(*heads_input_dims(variant, self.embedding_dim))
 
     def _text_embedding(self, value: Tensor, name: str) -> Tensor:
         value = torch.as_tensor(value, dtype=torch.float32)

@@ -1,0 +1,173 @@
+"""The reward registries: :data:`POSITIONAL`, :data:`DIRECTIONAL` and each reward's head layout.
+
+Every reward, built-in or a researcher's own, is added with :func:`register_reward`, which records
+the function under its name and what its image head reads (:data:`IMAGE_INPUTS`).
+:func:`~temporal_torchrl.rewards.heads.heads_input_dims` and
+:class:`~temporal_torchrl.rewards.TemporalReward` build the heads from that record, so a
+registered name works everywhere a built-in does. The built-ins register themselves at the end of
+:mod:`~temporal_torchrl.rewards.positional` and :mod:`~temporal_torchrl.rewards.directional`.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+
+from torch import Tensor
+
+#: A reward function; see :func:`register_reward` for the signature it must follow.
+RewardFunction = Callable[..., Tensor]
+
+#: Reward kinds, the registries they go into.
+KINDS = ("positional", "directional")
+#: What an image head can read: one embedding ``[D]``, the concatenation of a position part and a
+#: direction part ``[2 D]``, or nothing (None: a zero-shot reward without heads).
+IMAGE_LAYOUTS = ("embedding", "concatenated", None)
+
+#: Positional reward functions r_P by name.
+POSITIONAL: dict[str, RewardFunction] = {}
+#: Directional reward functions r_D by name.
+DIRECTIONAL: dict[str, RewardFunction] = {}
+#: The image-head layout of every registered reward, by name (one of :data:`IMAGE_LAYOUTS`).
+IMAGE_INPUTS: dict[str, str | None] = {}
+
+_REGISTRIES = {"positional": POSITIONAL, "directional": DIRECTIONAL}
+# Every keyword a reward function is called with (TemporalReward and the finetuning losses).
+_CALL_KEYWORDS = {"s0": None, "s_prev": None, "g": None, "b": None, "alpha": 0.4,
+                  "projection": "origin", "position": None}
+_SIGNATURE = ("fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=0.4, position=None, "
+              "projection='origin', **unused)")
+
+
+def register_reward(name: str, function: RewardFunction, *, kind: str,
+                    image_input: str | None = "embedding", overwrite: bool = False) -> None:
+    """Add a reward function under ``name`` so :class:`TemporalReward` can use it.
+
+    The function goes into :data:`POSITIONAL` (``kind="positional"``) or :data:`DIRECTIONAL`
+    (``kind="directional"``), and ``image_input`` is recorded so
+    :func:`~temporal_torchrl.rewards.heads.heads_input_dims` and :class:`TemporalReward` build
+    heads of the right sizes. A name is unique across both kinds.
+
+    The function must have the signature of the built-ins::
+
+        fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=0.4, position=None,
+           projection="origin", **unused) -> Tensor
+
+    - ``heads``: the :class:`~temporal_torchrl.rewards.RewardHeads` (``heads.image``,
+      ``heads.text``), or None when ``image_input=None``.
+    - ``s``: image embeddings ``[..., D]``; ``s0`` the episode's first embedding, ``s_prev``
+      s_{t-k} (the direction is ``s - s_prev``), ``position`` the position at which a directional
+      reward scores the direction (None means ``s``); each ``[..., D]`` or None.
+    - ``g``, ``b``: goal and baseline text embeddings ``[D]``.
+    - ``alpha``, ``projection``: goal-baseline regularisation strength and form (see
+      :func:`~temporal_torchrl.rewards.goal_baseline_regularise`).
+    - ``**unused``: callers pass every keyword above; a reward ignores those it does not need.
+    - Returns the reward, shape ``s.shape[:-1]`` (differentiable in the heads' parameters for
+      the finetuning losses).
+
+    Args:
+        name: the variant name (a non-empty string, not ``"none"``, which configs read as None).
+        function: the reward function.
+        kind: ``"positional"`` or ``"directional"``.
+        image_input: what the image head reads: ``"embedding"`` (D inputs, like furl, p1-p4, d1,
+            d2), ``"concatenated"`` (2·D inputs: a position part and a direction part, like
+            d3-d5) or None (zero-shot, no heads, like liv). The text head always reads D inputs.
+        overwrite: replace a reward already registered under ``name`` (of either kind).
+
+    Raises:
+        ValueError: for a bad ``name``, ``function``, ``kind`` or ``image_input``, or a ``name``
+            already registered without ``overwrite=True``.
+
+    Example:
+        >>> import torch
+        >>> from temporal_torchrl.rewards import TemporalReward, cosine_similarity
+        >>> def toy(heads, s, *, g, s0=None, **unused):
+        ...     # How much closer than the first frame is the current frame to the goal?
+        ...     image = heads.image(s) - heads.image(s0)
+        ...     return cosine_similarity(image, heads.text(g))
+        >>> register_reward("toy", toy, kind="positional")
+        >>> D = 8
+        >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="toy", rho=1.0)
+        >>> heads = reward.positional_heads
+        >>> heads.image_dim, heads.text_dim
+        (8, 8)
+        >>> s, s0 = torch.randn(3, D), torch.randn(3, D)
+        >>> reward(s, s0, s0, torch.zeros(3, 1, dtype=torch.bool))["reward"].shape
+        torch.Size([3, 1])
+        >>> unregister_reward("toy")
+    """
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"register_reward: name={name!r}; expected a non-empty string such as "
+                         "'p5'.")
+    if name.strip().lower() == "none":
+        raise ValueError(f"register_reward: name={name!r} is reserved (configs read 'none' as "
+                         "no reward); choose another name.")
+    if kind not in KINDS:
+        raise ValueError(f"register_reward({name!r}): kind={kind!r}; expected 'positional' "
+                         "(a value of the current position) or 'directional' (a value of the "
+                         "direction s - s_prev).")
+    if image_input not in IMAGE_LAYOUTS:
+        raise ValueError(
+            f"register_reward({name!r}): image_input={image_input!r}; expected 'embedding' "
+            "(the image head reads D inputs), 'concatenated' (2*D inputs: position part and "
+            "direction part) or None (zero-shot, no heads).")
+    if not callable(function):
+        raise ValueError(f"register_reward({name!r}): function={function!r} is not callable; "
+                         f"expected a function {_SIGNATURE}.")
+    _check_signature(name, function)
+    if name in IMAGE_INPUTS and not overwrite:
+        registered = "positional" if name in POSITIONAL else "directional"
+        raise ValueError(f"register_reward: a {registered} reward {name!r} is already "
+                         "registered; choose another name or pass overwrite=True to replace "
+                         "it.")
+    if name in IMAGE_INPUTS:
+        unregister_reward(name)
+    _REGISTRIES[kind][name] = function
+    IMAGE_INPUTS[name] = image_input
+
+
+def unregister_reward(name: str) -> None:
+    """Remove the reward registered under ``name`` (the inverse of :func:`register_reward`).
+
+    Raises:
+        ValueError: if no reward of that name is registered.
+    """
+    if name not in IMAGE_INPUTS:
+        raise ValueError(f"unregister_reward: no reward {name!r} is registered; registered: "
+                         f"{', '.join(IMAGE_INPUTS)}.")
+    POSITIONAL.pop(name, None)
+    DIRECTIONAL.pop(name, None)
+    del IMAGE_INPUTS[name]
+
+
+def image_input_of(name: str) -> str | None:
+    """The image-head layout (one of :data:`IMAGE_LAYOUTS`) of the reward registered as ``name``.
+
+    Raises:
+        ValueError: for an unknown name, or one put into :data:`POSITIONAL` or
+            :data:`DIRECTIONAL` directly instead of through :func:`register_reward`.
+    """
+    if name in IMAGE_INPUTS:
+        return IMAGE_INPUTS[name]
+    if name in POSITIONAL or name in DIRECTIONAL:
+        kind = "positional" if name in POSITIONAL else "directional"
+        raise ValueError(
+            f"Reward {name!r} is in {kind.upper()} but has no head layout; add it with "
+            f"register_reward({name!r}, fn, kind={kind!r}, image_input='embedding' | "
+            "'concatenated' | None) instead of assigning to the dict.")
+    raise ValueError(f"Unknown reward variant {name!r}; expected one of "
+                     f"{', '.join(IMAGE_INPUTS)}, or register it with register_reward().")
+
+
+def _check_signature(name: str, function: RewardFunction) -> None:
+    try:
+        signature = inspect.signature(function)
+    except (TypeError, ValueError):  # Some builtins and extension functions have none.
+        return
+    try:
+        signature.bind(None, None, **_CALL_KEYWORDS)
+    except TypeError as error:
+        raise ValueError(
+            f"register_reward({name!r}): {getattr(function, '__name__', function)!r} cannot be "
+            f"called the way rewards are ({error}); expected {_SIGNATURE} (**unused takes the "
+            "keywords a reward does not need).") from None
