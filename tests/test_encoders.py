@@ -19,6 +19,7 @@ from temporal_torchrl.encoders import (
     make_preprocessor,
     save_random_liv_checkpoint,
 )
+from temporal_torchrl.encoders.open_clip_encoder import PretrainedWeightsUnavailableError
 from temporal_torchrl.encoders.preprocessing import CLIP_MEAN, CLIP_STD
 from temporal_torchrl.transforms import EmbeddingTransform
 
@@ -240,3 +241,57 @@ def test_open_clip_encoder_loads_a_local_file(liv_files, frames, tmp_path):
     with torch.no_grad():
         expected = source.encode_image(encoder.preprocess_images(frames[:1]))
     torch.testing.assert_close(encoder.embed_images(frames[:1]), expected, rtol=1e-4, atol=1e-5)
+
+
+def test_open_clip_checkpoint_of_another_architecture_is_refused_clearly(liv_files, tmp_path):
+    liv_path, source, _ = liv_files
+    path = tmp_path / "rn50.pt"
+    torch.save(source.state_dict(), path)
+    with pytest.raises(ValueError) as error:
+        load_encoder("open_clip", checkpoint=path)  # model_name defaults to ViT-B-32
+    message = str(error.value)
+    assert len(message) < 3000 and isinstance(error.value.__cause__, RuntimeError)
+    assert f"checkpoint {str(path)!r}" in message and "model_name='ViT-B-32'" in message
+    assert "missing keys: visual.class_embedding" in message
+    assert "unexpected keys: " in message and "visual.bn1.weight" in message
+    assert "text_projection (checkpoint (512, 1024), model (512, 512))" in message
+    assert "+encoder.options.model_name=RN50-quickgelu" in message
+    with pytest.raises(ValueError, match=r"LIV's model.pt.*load_encoder\('liv'"):
+        load_encoder("open_clip", checkpoint=liv_path)
+
+
+def test_open_clip_pretrained_tag_fails_cleanly_offline(tmp_path, monkeypatch):
+    import huggingface_hub.constants
+
+    monkeypatch.setattr(huggingface_hub.constants, "HF_HUB_OFFLINE", True)
+    with pytest.raises(PretrainedWeightsUnavailableError) as error:
+        OpenCLIPEncoder("RN50", pretrained="openai", cache_dir=str(tmp_path))
+    assert isinstance(error.value, FileNotFoundError) and isinstance(error.value, RuntimeError)
+    assert isinstance(error.value.__cause__, OSError)
+    message = str(error.value)
+    assert "weights 'openai' for 'RN50'" in message and "'timm/resnet50_clip.openai'" in message
+    assert f"cache ({tmp_path})" in message and "seems offline" in message
+    assert "checkpoint='/path/to/open_clip_pytorch_model.bin'" in message
+    assert "encoder.checkpoint=/path/to/open_clip_pytorch_model.bin" in message
+    assert not list(tmp_path.rglob("*.bin"))
+    with pytest.raises(ValueError, match=r"unknown open_clip pretrained tag 'nonsense' for 'RN50'"
+                                         r".*\['openai', 'yfcc15m', 'cc12m'\]"):
+        OpenCLIPEncoder("RN50", pretrained="nonsense", cache_dir=str(tmp_path))
+
+
+def test_open_clip_pretrained_tag_loads_from_the_cache_offline(liv_files, tmp_path, monkeypatch):
+    import huggingface_hub.constants
+
+    _, source, _ = liv_files  # RN50-quickgelu: the same weights as RN50's
+    commit = "0" * 40
+    snapshot = tmp_path / "models--timm--resnet50_clip.openai" / "snapshots" / commit
+    snapshot.mkdir(parents=True)
+    torch.save(source.state_dict(), snapshot / "open_clip_pytorch_model.bin")
+    (snapshot.parent.parent / "refs").mkdir()
+    (snapshot.parent.parent / "refs" / "main").write_text(commit)
+    monkeypatch.setattr(huggingface_hub.constants, "HF_HUB_OFFLINE", True)
+    with pytest.warns(UserWarning, match="QuickGELU mismatch"):
+        encoder = OpenCLIPEncoder("RN50", pretrained="openai", cache_dir=str(tmp_path))
+    assert encoder.dim == 1024
+    torch.testing.assert_close(encoder.model.visual.conv1.weight, source.visual.conv1.weight,
+                               rtol=0, atol=0)

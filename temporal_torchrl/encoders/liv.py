@@ -32,17 +32,20 @@ Example (random weights in LIV's on-disk format, as the tests and benchmarks use
 
 from __future__ import annotations
 
-import logging
 import os
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from pathlib import Path
 
 import open_clip
 import torch
 from torch import nn
 
-from temporal_torchrl.encoders.open_clip_encoder import OpenCLIPEncoder
+from temporal_torchrl.encoders.open_clip_encoder import (
+    LISTED_NAMES,
+    OpenCLIPEncoder,
+    quiet_random_init,
+    state_dict_mismatch,
+)
 from temporal_torchrl.encoders.preprocessing import ImagePreprocessor
 
 LIV_ARCHITECTURE = "RN50-quickgelu"
@@ -50,29 +53,11 @@ LIV_HUB_REPO = "jasonyma/LIV"
 LIV_HUB_FILENAME = "model.pt"
 LIV_CHECKPOINT_ENTRY = "liv"
 LIV_KEY_PREFIX = "module.model."
-_LISTED_NAMES = 10
-
-
-class _DropRandomInitWarning(logging.Filter):
-    def filter(self, record: logging.LogRecord) -> bool:
-        return "initialized randomly" not in record.getMessage()
-
-
-@contextmanager
-def _quiet_random_init() -> Iterator[None]:
-    # open_clip warns that a model built without pretrained weights is random; here the weights
-    # are loaded right after, so the warning would only mislead.
-    log_filter = _DropRandomInitWarning()
-    logging.getLogger().addFilter(log_filter)
-    try:
-        yield
-    finally:
-        logging.getLogger().removeFilter(log_filter)
 
 
 def build_liv_architecture() -> nn.Module:
     """A randomly initialised open_clip ``RN50-quickgelu`` (LIV's architecture), float32."""
-    with _quiet_random_init():
+    with quiet_random_init():
         return open_clip.create_model(LIV_ARCHITECTURE, pretrained=None)
 
 
@@ -128,7 +113,7 @@ def load_liv_state_dict(path: str | os.PathLike) -> dict[str, torch.Tensor]:
             f"https://huggingface.co/{LIV_HUB_REPO}"
         ) from error
     if not isinstance(checkpoint, Mapping) or LIV_CHECKPOINT_ENTRY not in checkpoint:
-        found = list(checkpoint)[:_LISTED_NAMES] if isinstance(checkpoint, Mapping) else (
+        found = list(checkpoint)[:LISTED_NAMES] if isinstance(checkpoint, Mapping) else (
             type(checkpoint).__name__)
         raise ValueError(
             f"{str(path)!r} is not a LIV checkpoint: expected a dict with a "
@@ -140,35 +125,15 @@ def load_liv_state_dict(path: str | os.PathLike) -> dict[str, torch.Tensor]:
     }
 
 
-def _listed(names: list[str]) -> str:
-    shown = ", ".join(names[:_LISTED_NAMES])
-    more = len(names) - _LISTED_NAMES
-    return shown + (f" ... and {more} more" if more > 0 else "")
-
-
 def check_state_dict(model: nn.Module, state_dict: Mapping[str, torch.Tensor],
                      source: str = "checkpoint") -> None:
     """Raise a ValueError naming every missing, unexpected or wrongly shaped entry."""
-    expected = model.state_dict()
-    missing = [key for key in expected if key not in state_dict]
-    unexpected = [key for key in state_dict if key not in expected]
-    mismatched = [
-        f"{key} (checkpoint {tuple(state_dict[key].shape)}, model {tuple(value.shape)})"
-        for key, value in expected.items()
-        if key in state_dict and tuple(state_dict[key].shape) != tuple(value.shape)
-    ]
-    problems = []
-    if missing:
-        problems.append(f"missing keys: {_listed(missing)}")
-    if unexpected:
-        problems.append(f"unexpected keys: {_listed(unexpected)}")
-    if mismatched:
-        problems.append(f"shape mismatches: {_listed(mismatched)}")
+    problems = state_dict_mismatch(model, state_dict)
     if problems:
         raise ValueError(
             f"{source} does not match open_clip's {LIV_ARCHITECTURE!r} (LIV's architecture; key "
-            f"names shown without the {LIV_KEY_PREFIX!r} prefix): " + "; ".join(problems)
-            + ". Pass LIV's own model.pt from https://huggingface.co/" + LIV_HUB_REPO
+            f"names shown without the {LIV_KEY_PREFIX!r} prefix): {problems}. Pass LIV's own "
+            f"model.pt from https://huggingface.co/{LIV_HUB_REPO}"
         )
 
 
