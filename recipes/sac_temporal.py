@@ -92,8 +92,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         if reward.directional_heads is not None:
             losses.append(DirectionalLoss(reward, goal_image,
                                           same_position=cfg.reward.same_position))
-        head_optimizers = [torch.optim.Adam(loss.parameters(), lr=cfg.reward.lr)
-                           for loss in losses]
+        head_optimizers = [utils.make_adam(loss.parameters(), cfg.reward.lr) for loss in losses]
 
     # ---- SAC
     actor, qvalue = utils.make_sac_agent(cfg, env)
