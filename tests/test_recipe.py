@@ -215,9 +215,11 @@ def test_killed_process_resumes(tmp_path):
             "train.threads=1"]
     process = subprocess.Popen([*args, "train.episodes=1000"], stdout=subprocess.DEVNULL,
                                stderr=subprocess.DEVNULL)
+    # An episode's row is written just before its checkpoint: the third row means the second
+    # episode's checkpoint is on disk.
     deadline = time.time() + 120
     while time.time() < deadline and (not (run_dir / "episodes.csv").exists()
-                                      or len(episode_rows(run_dir)) < 2):
+                                      or len(episode_rows(run_dir)) < 3):
         time.sleep(0.05)
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
