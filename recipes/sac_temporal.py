@@ -57,7 +57,6 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     ``given_keys``: the keys set on the command line, which alone may change a resumed run's
     ``train.episodes`` and the other :data:`utils.RESUMABLE_KEYS` (None: all of ``cfg``'s do).
     """
-    utils.import_reward_modules(cfg.reward.modules)
     utils.validate_config(cfg)
     run_dir = utils.check_run_dir(cfg)
     if cfg.resume:

@@ -132,7 +132,10 @@ def import_reward_modules(modules: Sequence[str]) -> None:
 
 
 def validate_config(cfg: DictConfig) -> None:
-    """Stop before any work on a bad value, naming the config key (ValueError)."""
+    """Stop before any work on a bad value, naming the config key (ValueError).
+
+    Imports ``reward.modules`` first, so the rewards they register are known.
+    """
     def bad(key: str, value: Any, expected: str) -> ValueError:
         return ValueError(f"config {key}={value!r} is invalid: expected {expected}. "
                           f"Fix it on the command line, e.g. {key}=<value>.")
@@ -143,6 +146,7 @@ def validate_config(cfg: DictConfig) -> None:
             hint = (f"did you mean encoder.name={value}?" if group == "encoder" else
                     f"set its keys one by one, e.g. {group}.<key>=<value>")
             raise bad(group, value, f"a group of settings ({hint})")
+    import_reward_modules(cfg.reward.modules)  # they may register the reward names checked below
     if cfg.env.task not in TASKS:
         raise bad("env.task", cfg.env.task, "a Metaworld MT50 task name such as "
                   f"drawer-open ({len(TASKS)} known: see temporal_torchrl.envs.TASKS)")
