@@ -47,6 +47,8 @@ from temporal_torchrl.transforms import (
 EPISODE_COLUMNS = ("episode", "env_steps", "success", "return", "mean_vlm_reward", "stage")
 LOGGER_BACKENDS = ("wandb", "csv", "none")
 CHECKPOINT = "checkpoint.pt"
+#: Expert episodes get the protocol's full episode length to succeed, however short training's.
+EXPERT_MAX_STEPS = 500
 REPLAY_DIR = "replay"
 
 
@@ -171,12 +173,13 @@ def validate_config(cfg: DictConfig) -> None:
     if cfg.replay_buffer.embedding_dtype not in EMBEDDING_DTYPES:
         raise bad("replay_buffer.embedding_dtype", cfg.replay_buffer.embedding_dtype,
                   f"one of {', '.join(EMBEDDING_DTYPES)}")
-    longest = max(cfg.env.max_episode_steps, 500 if cfg.train.preload_positives else 0) + 1
+    longest = max(cfg.env.max_episode_steps,
+                  EXPERT_MAX_STEPS if cfg.train.preload_positives else 0) + 1
     capacity = cfg.replay_buffer.capacity
     if capacity is not None and not (_integer(longest)[0](capacity)):
         raise bad("replay_buffer.capacity", capacity,
                   f"null (the whole run) or an integer >= {longest}, the rows of the longest "
-                  "episode (its steps + 1; preloaded experts run up to 500 steps)")
+                  f"episode (its steps + 1; preloaded experts run up to {EXPERT_MAX_STEPS} steps)")
     try:
         device = torch.device(cfg.encoder.device)
     except (RuntimeError, TypeError) as error:
@@ -355,10 +358,10 @@ def collect_successful_experts(cfg: DictConfig, encoder: Encoder | None, count: 
                                max_attempts: int = 5) -> list[TensorDict]:
     """``count`` successful scripted-expert episodes of the run's task, seed and frames.
 
-    Experts get the protocol's full 500 steps to succeed even when training episodes are
-    shorter, and are cut ``train.expert_steps_after_success`` steps after their first success
-    (``null``: whole episodes); noisy episodes that fail are replaced (new noise seeds), up to
-    ``max_attempts`` rounds. Frames are rendered when ``encoder`` reads pixels; nothing is
+    Experts get the protocol's full :data:`EXPERT_MAX_STEPS` steps to succeed even when training
+    episodes are shorter, and are cut ``train.expert_steps_after_success`` steps after their first
+    success (``null``: whole episodes); noisy episodes that fail are replaced (new noise seeds),
+    up to ``max_attempts`` rounds. Frames are rendered when ``encoder`` reads pixels; nothing is
     embedded here.
     """
     render = encoder is not None and encoder.input_key == "pixels"
@@ -367,8 +370,8 @@ def collect_successful_experts(cfg: DictConfig, encoder: Encoder | None, count: 
         batch = collect_expert_episodes(
             cfg.env.task, cfg.env.seed, num_episodes=count - len(episodes), render=render,
             image_size=cfg.env.image_size, camera=cfg.env.camera,
-            fast_render=cfg.env.fast_render, max_episode_steps=max(cfg.env.max_episode_steps,
-                                                                   500),
+            fast_render=cfg.env.fast_render,
+            max_episode_steps=max(cfg.env.max_episode_steps, EXPERT_MAX_STEPS),
             steps_after_success=cfg.train.expert_steps_after_success,
             generator_seed=None if attempt == 0 else cfg.env.seed + 1000 * attempt)
         episodes += [episode for episode in batch if bool(episode["next", "success"].any())]
