@@ -114,22 +114,19 @@ def test_directional_loss_matches_thesis_terms(variant):
     assert int(out["stage"]) == 2
 
 
-def test_directional_loss_skips_episode_starts():
-    """At step 0 the observed direction is zero (s_{t-k} = s_t): such states must not count."""
-    torch.manual_seed(3)
-    dim = 6
-    reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional=None,
-                            directional="d3")
-    loss = DirectionalLoss(reward, torch.randn(dim))
-    negative = TensorDict({key: torch.randn(4, dim) for key in
-                           ("embedding", "initial_embedding", "previous_embedding")}, [4])
-    negative["step"] = torch.tensor([0, 3, 7, 9])
-    negative["previous_embedding"][0] = negative["embedding"][0]
-    later_only = negative[1:]
-    expected = loss(TensorDict({"negative": later_only.exclude("step")}, [3]))
-    out = loss(TensorDict({"negative": negative}, [4]))
-    assert out["loss_directional"].item() == pytest.approx(
-        expected["loss_directional"].item(), abs=1e-6)
+def test_finetuning_batches_never_hold_the_reset_frame():
+    """s_0 (step 0) is the same image in every episode of a fixed layout: it must be neither a
+    positive nor a negative, and the directional loss never sees its zero direction."""
+    from test_replay import make_episode
+
+    buffer = EpisodeReplayBuffer(capacity=300, history=2)
+    buffer.extend(make_episode(0, 20))
+    buffer.extend(make_episode(1, 20, successes=(15,)))
+    batch = buffer.sample_finetuning(500, gap=10)
+    for key in ("negative", "positive", ("positive_pair", "earlier")):
+        assert (batch[key]["step"] >= 1).all(), key
+    assert set(batch["negative", "step"].tolist()) == set(range(1, 21))
+    assert set(batch["positive", "step"].tolist()) == set(range(1, 17))
 
 
 def test_directional_release_option_scores_contrast_at_plain_position():
@@ -146,7 +143,8 @@ def test_directional_release_option_scores_contrast_at_plain_position():
     common = {"g": reward.goal_embedding, "b": reward.baseline_embedding, "alpha": reward.alpha,
               "s0": negative["initial_embedding"]}
     heads = reward.directional_heads
-    observed = DIRECTIONAL["d4"](heads, s_t, s_prev=negative["previous_embedding"], **common)
+    observed = DIRECTIONAL["d4"](heads, s_t, s_prev=negative["previous_embedding"], **common,
+                                 projection="origin")
     towards_plain = DIRECTIONAL["d3"](heads, goal.expand_as(s_t), s_prev=s_t, position=s_t,
                                       **common)
     batch = TensorDict({"negative": negative}, [5])

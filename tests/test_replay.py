@@ -104,8 +104,9 @@ def test_labels_follow_furl_rule():
     assert buffer.has_positives
     positives = buffer.sample_states(400, POSITIVE)
     assert (positives["label"] == POSITIVE).all() and (positives["episode"] == 1).all()
-    # states s_0 .. s_17: transitions 0..16 are positive (first success 14, then 15 and 16)
-    assert set(positives["step"].tolist()) == set(range(18))
+    # states s_1 .. s_17: transitions 0..16 are positive (first success 14, then 15 and 16);
+    # the reset frame s_0 is never labelled
+    assert set(positives["step"].tolist()) == set(range(1, 18))
     negatives = buffer.sample_states(200, NEGATIVE)
     assert (negatives["episode"] == 0).all()
     assert torch.equal(marker(negatives["previous_embedding"]),
@@ -114,9 +115,26 @@ def test_labels_follow_furl_rule():
     assert torch.equal(pairs["later", "step"] - pairs["earlier", "step"], torch.full((100,), 10))
     assert torch.equal(pairs["later", "episode"], pairs["earlier", "episode"])
     assert (pairs["earlier", "label"] == POSITIVE).all()
-    assert buffer.sample_positive_pairs(4, gap=18) is None
+    assert set(pairs["earlier", "step"].tolist()) == set(range(1, 8))
+    assert buffer.sample_positive_pairs(4, gap=17) is None
     stage2 = buffer.sample_finetuning(8, gap=10)
     assert set(stage2.keys()) == {"negative", "positive", "positive_pair"}
+
+
+def test_permanent_episodes_survive_wrap_around():
+    """Preloaded experts are never overwritten: the ring wraps to the row after them."""
+    buffer = EpisodeReplayBuffer(capacity=40, history=2)
+    buffer.extend(make_episode(0, 9, successes=(8,)), permanent=True)  # rows 0..9
+    for episode in range(1, 8):  # 10 rows each: the ring (rows 10..39) wraps twice
+        buffer.extend(make_episode(episode, 9))
+    assert buffer.num_permanent_episodes == 1 and buffer.has_positives
+    stored = set(buffer.sample(2000)["episode"].tolist())
+    assert stored == {0, 5, 6, 7}
+    check_histories(buffer, buffer.sample(300))
+    with pytest.raises(ValueError, match="before any other episode"):
+        buffer.extend(make_episode(8, 9), permanent=True)
+    with pytest.raises(ValueError, match="10 rows hold permanent episodes"):
+        buffer.extend(make_episode(9, 30))
 
 
 def test_label_window_keeps_most_recent():

@@ -41,13 +41,19 @@ def unit(x):
 
 
 def regularise(x, g, b, alpha, projection):
-    """alpha proj_L x + (1 - alpha) x on unit x, g, b."""
-    x, g, b = unit(x), unit(g), unit(b)
-    d = g - b
-    if projection == "origin":
-        proj = (x @ d) / (d @ d) * d
-    else:
+    """Eq. 4.5's alpha proj_L x + (1 - alpha) x.
+
+    ``origin`` (thesis, and its release's ``gb_reward_before``): x projected onto the direction
+    g - b through the origin, on the vectors as given. ``line`` (VLM-RMs): unit x, g, b, and the
+    projection onto the line through b and g.
+    """
+    if projection == "line":
+        x, g, b = unit(x), unit(g), unit(b)
+        d = g - b
         proj = b + ((x - b) @ d) / (d @ d) * d
+    else:
+        d = g - b
+        proj = (x @ d) / (d @ d) * d
     return alpha * proj + (1 - alpha) * x
 
 
@@ -81,9 +87,11 @@ def reference(variant, heads, s, s0, s_prev, g, b, alpha, projection="origin", p
 
 @pytest.fixture
 def embeddings():
+    # Far from unit length (LIV embeddings are not normalised): a form that normalises s_t, g or
+    # b where the equation does not gives other values.
     gen = torch.Generator().manual_seed(1)
-    s, s0, s_prev, position = (torch.randn(BATCH, D, generator=gen) for _ in range(4))
-    g, b = torch.randn(D, generator=gen), torch.randn(D, generator=gen)
+    s, s0, s_prev, position = (3.0 * torch.randn(BATCH, D, generator=gen) for _ in range(4))
+    g, b = 4.0 * torch.randn(D, generator=gen), 0.5 * torch.randn(D, generator=gen)
     return s, s0, s_prev, position, g, b
 
 
@@ -156,8 +164,25 @@ def test_alpha_zero_reduces_p3_to_furl_and_p4_to_csim(embeddings):
     p3 = POSITIONAL["p3"](heads, s, g=g, b=b, alpha=0.0)
     torch.testing.assert_close(p3, POSITIONAL["furl"](heads, s, g=g))
     p4 = POSITIONAL["p4"](heads, s, g=g, b=b, alpha=0.0)
-    unit_s = s / s.norm(dim=-1, keepdim=True)
-    torch.testing.assert_close(p4, POSITIONAL["furl"](heads, unit_s, g=g))
+    torch.testing.assert_close(p4, POSITIONAL["furl"](heads, s, g=g))
+
+
+def test_p4_and_d5_regularise_the_raw_embedding_by_hand():
+    """s = (2, 1, 1), g = (2, 2, 0), b = (1, -1, 0): d = g - b = (1, 3, 0), s·d / d·d = 1/2, so
+    proj_L s = (0.5, 1.5, 0) and with alpha = 0.4 eq. 4.5 gives 0.4 proj_L s + 0.6 s =
+    (1.4, 1.2, 0.6). Unit-normalising s, g, b first would give another direction
+    (n(g) - n(b) is not parallel to g - b)."""
+    s, s_prev = torch.tensor([[2.0, 1.0, 1.0]]), torch.tensor([[1.0, 0.0, 1.0]])
+    g, b = torch.tensor([2.0, 2.0, 0.0]), torch.tensor([1.0, -1.0, 0.0])
+    regularised = torch.tensor([[1.4, 1.2, 0.6]])
+    torch.manual_seed(0)
+    heads = RewardHeads(3, 3, hidden_dim=4, out_dim=2)
+    got = POSITIONAL["p4"](heads, s, g=g, b=b, alpha=0.4)
+    torch.testing.assert_close(got, POSITIONAL["furl"](heads, regularised, g=g))
+    d_heads = RewardHeads(6, 3, hidden_dim=4, out_dim=2)
+    got = DIRECTIONAL["d5"](d_heads, s, s_prev=s_prev, g=g, b=b, alpha=0.4)
+    torch.testing.assert_close(got, DIRECTIONAL["d3"](d_heads, s, s_prev=s_prev, g=g, b=b,
+                                                      position=regularised))
 
 
 @pytest.mark.parametrize("variant", ["d1", "d3", "d4", "d5"])

@@ -60,11 +60,12 @@ def preload_experts(buffer: EpisodeReplayBuffer, episodes: list[TensorDictBase],
     rule as training episodes (:func:`~temporal_torchrl.data.episode_labels`): a successful expert
     episode, cut a few steps after its first success, is positive up to its first success and
     through the success steps right after it (steps after success flips back off, as it can in
-    door-open and push, stay unlabelled).
+    door-open and push, stay unlabelled). They are inserted as permanent episodes: however long
+    the run, the ring of training episodes never overwrites them.
     """
     rows = []
     for episode in episodes:
         if "embedding" not in episode.keys() and encoder is not None:
             episode = embed_episode(episode, encoder)
-        rows.append(buffer.extend(episode))
+        rows.append(buffer.extend(episode, permanent=True))
     return rows

@@ -23,7 +23,15 @@ older episode it overlaps *as a whole*, and samples uniformly over valid rows wi
 sets, using ``LazyTensorStorage`` for the memory itself.
 
 Labels (FuRL's rule, :func:`episode_labels`) are written when an episode is inserted, i.e. when
-it has ended: ``+1`` positive, ``-1`` negative, ``0`` unlabelled.
+it has ended: ``+1`` positive, ``-1`` negative, ``0`` unlabelled. They label the states reached by
+a step, s_1 .. s_T: the reset frame s_0 is never labelled, as in the reference implementations
+(which embed after ``env.step``). With a fixed layout s_0 is the same image in every episode, so
+labelling it would sample one state as a positive and as a negative at once.
+
+Permanent episodes (``extend(..., permanent=True)``, stage 2's preloaded experts) are written
+first and kept apart from the ring: when the buffer wraps, it wraps to the row after them, so
+they are never overwritten, however long the run (FuRL keeps its positives in a buffer of their
+own for the same reason).
 
 Example:
     >>> import torch
@@ -115,6 +123,8 @@ class EpisodeReplayBuffer:
         # episode id -> (first row, number of rows); only episodes still readable are kept.
         self._episodes: dict[int, tuple[int, int]] = {}
         self._positive_episodes = 0
+        self._permanent_episodes = 0
+        self._permanent_rows = 0
         self._refresh_indices()
 
     # ------------------------------------------------------------------ writing
@@ -140,29 +150,35 @@ class EpisodeReplayBuffer:
         rows["terminated"] = torch.cat([torch.zeros(1, 1, dtype=torch.bool),
                                         terminated.reshape(steps, 1).bool()], 0)
         labels = episode_labels(next_success)
-        rows["label"] = torch.cat([labels[:1], labels], 0)
+        rows["label"] = torch.cat([torch.full((1,), UNLABELLED, dtype=torch.int8), labels], 0)
         rows["step"] = torch.arange(steps + 1, dtype=torch.int32)
         last = torch.zeros(steps + 1, dtype=torch.bool)
         last[-1] = True
         rows["last"] = last
         return TensorDict(rows, [steps + 1])
 
-    def extend(self, episode: TensorDictBase) -> TensorDict:
+    def extend(self, episode: TensorDictBase, *, permanent: bool = False) -> TensorDict:
         """Insert one ended episode (``env.rollout()`` layout ``[T]``, pixels ignored).
 
         Returns its compact rows, which :meth:`extend_rows` accepts (e.g. to rebuild the buffer
-        from saved episodes when a run resumes).
+        from saved episodes when a run resumes). ``permanent``: never overwritten (see the
+        module docstring); only before any other episode.
         """
         rows = self.episode_rows(episode)
-        self.extend_rows(rows)
+        self.extend_rows(rows, permanent=permanent)
         return rows
 
-    def extend_rows(self, rows: TensorDictBase) -> int:
+    def extend_rows(self, rows: TensorDictBase, *, permanent: bool = False) -> int:
         """Insert the compact rows of one episode; returns its episode id."""
         length = rows.shape[0]
-        if length > self.capacity:
+        if permanent and self._next_episode > self._permanent_episodes:
+            raise ValueError("permanent episodes must be inserted before any other episode "
+                             "(they sit at the start of the storage, outside the ring).")
+        free = self.capacity - self._permanent_rows
+        if length > free:
             raise ValueError(f"an episode of {length} rows does not fit in capacity="
-                             f"{self.capacity}; raise the buffer capacity.")
+                             f"{self.capacity} ({self._permanent_rows} rows hold permanent "
+                             "episodes); raise the buffer capacity.")
         if self._storage.initialized:
             stored = set(self._storage._storage.keys()) - {"episode", "valid"}
             if set(rows.keys()) != stored:
@@ -170,7 +186,11 @@ class EpisodeReplayBuffer:
                     f"an episode with keys {sorted(rows.keys())} does not match the buffer's "
                     f"{sorted(stored)}; every episode must carry the same keys (embed all of "
                     "them with the same encoder, or none of them).")
-        start = self._cursor if self._cursor + length <= self.capacity else 0
+        if permanent and self._cursor + length > self.capacity:
+            raise ValueError(f"permanent episodes fill more than capacity={self.capacity} rows; "
+                             "raise the buffer capacity.")
+        start = (self._cursor if self._cursor + length <= self.capacity
+                 else self._permanent_rows)
         self._invalidate_overlapping(start, start + length)
         episode_id = self._next_episode
         rows = rows.clone(False)
@@ -185,6 +205,9 @@ class EpisodeReplayBuffer:
         self._positive_episodes += bool((rows["label"] == POSITIVE).any())
         self._next_episode += 1
         self._cursor = start + length
+        if permanent:
+            self._permanent_episodes += 1
+            self._permanent_rows = self._cursor
         self._refresh_indices()
         return episode_id
 
@@ -230,6 +253,11 @@ class EpisodeReplayBuffer:
     def num_episodes(self) -> int:
         """Number of episodes still stored whole."""
         return len(self._episodes)
+
+    @property
+    def num_permanent_episodes(self) -> int:
+        """Number of permanent episodes (never overwritten)."""
+        return self._permanent_episodes
 
     @property
     def has_positives(self) -> bool:
@@ -310,9 +338,10 @@ class EpisodeReplayBuffer:
         """Pairs ``(s_i, s_{i-gap})`` from one positive episode (both positive), or ``None``.
 
         Returns a TensorDict with sub-TensorDicts ``"later"`` (s_i) and ``"earlier"``
-        (s_{i-gap}); positives start at step 0, so ``i - gap`` is in the same positive run.
+        (s_{i-gap}); positives run from step 1 (s_0 is unlabelled), so ``i - gap >= 1`` keeps
+        both in the same positive run.
         """
-        candidates = self._positives[self._column("step")[self._positives] >= gap]
+        candidates = self._positives[self._column("step")[self._positives] > gap]
         if candidates.numel() == 0:
             return None
         later = self._draw(candidates, batch_size, "positive pairs")

@@ -12,6 +12,12 @@ Both are TorchRL :class:`~torchrl.objectives.LossModule` s that read one batch f
 The stage is read from the batch: stage 2 (thesis 3.1.3.2, 4.3.3.2) starts as soon as the buffer
 holds a positive episode, which is when the batch starts to carry ``"positive"``. Each loss owns
 only its heads, so ``torch.optim.Adam(loss.parameters(), lr=1e-4)`` is its optimizer.
+
+The rewards are computed by the :class:`~temporal_torchrl.rewards.TemporalReward` itself
+(:meth:`~temporal_torchrl.rewards.TemporalReward.positional_reward`,
+:meth:`~temporal_torchrl.rewards.TemporalReward.directional_reward`), the same calls the env
+transform and the replay relabelling make: a loss holds no copy of the variant, alpha, projection
+or text embeddings, so it can never drift from the reward the agent is trained on.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 from torchrl.objectives import LossModule
 
-from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, TemporalReward
+from temporal_torchrl.rewards import DIRECTIONAL, TemporalReward
 
 #: The release's optimizer settings for the heads (prior-implementations.md).
 HEADS_LEARNING_RATE = 1e-4
@@ -74,22 +80,16 @@ class PositionalRankingLoss(LossModule):
             raise ValueError(f"reward.positional={reward.positional!r} has no trainable heads; "
                              "a positional ranking loss needs furl or p1-p4.")
         self.heads = reward.positional_heads
-        self.variant = reward.positional
-        self.alpha = reward.alpha
-        self.projection = reward.projection
+        _reference(self, reward)
         self.delta = delta
         self.l2_margin = l2_margin
-        self.register_buffer("goal_embedding", reward.goal_embedding.clone())
-        self.register_buffer("baseline_embedding", reward.baseline_embedding.clone())
         self.register_buffer("goal_image_embedding",
                              torch.as_tensor(goal_image_embedding, dtype=torch.float32).clone())
 
     def positional_reward(self, states: TensorDictBase) -> Tensor:
         """r^VLM_P of a batch of states (with gradients into the heads)."""
-        return POSITIONAL[self.variant](
-            self.heads, states["embedding"], s0=states["initial_embedding"],
-            s_prev=states["previous_embedding"], g=self.goal_embedding,
-            b=self.baseline_embedding, alpha=self.alpha, projection=self.projection)
+        return self.reward.positional_reward(states["embedding"], states["initial_embedding"],
+                                             states["previous_embedding"])
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         """Losses for one batch: ``loss_positional`` (to minimise), the parts, and ``stage``."""
@@ -128,8 +128,8 @@ class DirectionalLoss(LossModule):
     direction Δs_t = s_t - s_{t-k} and the direction towards the goal image embedding
     Δ̂s_t = s_g - s_t, both at the position s_t (batch means of each term).
     Stage 2 adds, on positive states, ``L^D_pos = r_D(s_t, Δ̄s_t) - r_D(s_t, Δs_t)`` with the
-    opposite direction Δ̄s_t = s_{t-k} - s_t. States at an episode's start (``step`` 0, where the
-    observed direction is zero and the env gives no reward) are left out of both means.
+    opposite direction Δ̄s_t = s_{t-k} - s_t. The buffer never labels an episode's reset frame s_0
+    (as in the reference implementations), so every observed direction is that of a real step.
 
     Args:
         reward: the :class:`TemporalReward` whose directional heads are trained.
@@ -151,12 +151,8 @@ class DirectionalLoss(LossModule):
             raise ValueError("reward.directional=None: a directional loss needs one of "
                              f"{', '.join(DIRECTIONAL)}.")
         self.heads = reward.directional_heads
-        self.variant = reward.directional
+        _reference(self, reward)
         self.same_position = same_position
-        self.alpha = reward.alpha
-        self.projection = reward.projection
-        self.register_buffer("goal_embedding", reward.goal_embedding.clone())
-        self.register_buffer("baseline_embedding", reward.baseline_embedding.clone())
         self.register_buffer("goal_image_embedding",
                              torch.as_tensor(goal_image_embedding, dtype=torch.float32).clone())
 
@@ -164,16 +160,15 @@ class DirectionalLoss(LossModule):
                            states: TensorDictBase, position: Tensor | None = None,
                            variant: str | None = None) -> Tensor:
         """r_D of the direction ``direction_end - direction_start`` at ``position``."""
-        return DIRECTIONAL[variant or self.variant](
-            self.heads, direction_end, s0=states["initial_embedding"], s_prev=direction_start,
-            g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha,
-            position=position, projection=self.projection)
+        return self.reward.directional_reward(direction_end, direction_start,
+                                              states["initial_embedding"], position=position,
+                                              variant=variant)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         """Losses for one batch: ``loss_directional`` (to minimise), the parts, and ``stage``."""
         # The release scores the contrasted direction at the plain position n(s_t): D3's input.
-        contrast_variant = (self.variant if self.same_position or self.variant in ("d1", "d2")
-                            else "d3")
+        variant = self.reward.directional
+        contrast_variant = (None if self.same_position or variant in ("d1", "d2") else "d3")
         parts = {}
         stage = 2 if "positive" in tensordict.keys() else 1
         negative = tensordict.get("negative", None)
@@ -183,14 +178,14 @@ class DirectionalLoss(LossModule):
             towards_goal = self.directional_reward(
                 self.goal_image_embedding.expand_as(s_t), s_t, negative, position=s_t,
                 variant=contrast_variant)
-            parts["loss_negative"] = _mean_after_start(observed - towards_goal, negative)
+            parts["loss_negative"] = (observed - towards_goal).mean()
         if stage == 2:
             positive = tensordict["positive"]
             s_t, s_tk = positive["embedding"], positive["previous_embedding"]
             observed = self.directional_reward(s_t, s_tk, positive)
             opposite = self.directional_reward(s_tk, s_t, positive, position=s_t,
                                                variant=contrast_variant)
-            parts["loss_positive"] = _mean_after_start(opposite - observed, positive)
+            parts["loss_positive"] = (opposite - observed).mean()
         total = sum(parts.values(), self.goal_image_embedding.new_zeros(()))
         out = {name: value.detach() for name, value in parts.items()}
         out["loss_directional"] = total
@@ -198,15 +193,8 @@ class DirectionalLoss(LossModule):
         return TensorDict(out, [])
 
 
-def _mean_after_start(values: Tensor, states: TensorDictBase) -> Tensor:
-    """Mean over the states past their episode's first (``step`` > 0, when the batch says).
-
-    At an episode's first state s_{t-k} = s_0 = s_t, so the observed direction is zero: the env
-    never rewards that input (rewards start at s_1), and training on it only pulls the zero
-    direction's reward down.
-    """
-    step = states.get("step", None)
-    if step is None:
-        return values.mean()
-    keep = step.reshape(values.shape) > 0
-    return (values * keep).sum() / keep.sum().clamp_min(1)
+def _reference(loss: LossModule, reward: TemporalReward) -> None:
+    # Referenced, not registered as a submodule: the loss's parameters and state_dict stay its
+    # own heads (one optimizer per loss), while the reward's variant, text embeddings, alpha and
+    # projection are read at every call.
+    loss.__dict__["reward"] = reward

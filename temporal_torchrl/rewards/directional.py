@@ -94,8 +94,10 @@ def d5(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor
     """D5, goal-baseline-regularised position and direction (thesis 4.3.2):
     r_D5(s_t, Δs_t) = csim(f^D_{W_I}((alpha proj_L s_t + (1 - alpha) s_t) ⊕ Δs_t),
                            f^D_{W_L}(g - b)),
-    L from g and b (see :func:`~temporal_torchrl.rewards.positional.goal_baseline_regularise`),
-    with both parts scaled to unit length before the concatenation.
+    L = g - b. The regularisation runs on the raw embeddings s_t, g and b (``projection="origin"``,
+    as the thesis and its release write it; see
+    :func:`~temporal_torchrl.rewards.positional.goal_baseline_regularise`); the regularised
+    position and the direction are then each scaled to unit length before the concatenation.
     The position s_t is ``position`` (default ``s``).
     """
     s_prev = _required(s_prev, "s_prev", "d5")

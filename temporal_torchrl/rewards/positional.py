@@ -10,26 +10,29 @@ single vectors) and broadcast over the batch.
 Normalisation: csim(x, y) = x·y / (max(||x||, eps) max(||y||, eps)) with eps = :data:`EPS`, so a
 zero vector (e.g. s_t - s_0 at t = 0 in P2) gives a reward of 0 instead of NaN.
 
-Goal-baseline regularisation (P3, P4 and the D5 position) comes in two forms, chosen by
-``projection``:
+Goal-baseline regularisation (thesis 3.1.2, eq. 4.5) replaces a vector x by
+alpha proj_L x + (1 - alpha) x. Its two forms, chosen by ``projection``:
 
-- ``"origin"`` (default; the thesis's own release, which produced its tables):
+- ``"origin"`` (default; the thesis's equations and its release, which produced its tables):
   proj_L x = ((x·d) / (d·d)) d with d = g - b, the projection onto the direction g - b through
-  the origin.
-- ``"line"`` (VLM-RMs, Rocamonde et al. 2024, the method's source paper):
-  proj_L x = b + (((x - b)·d) / (d·d)) d, the projection onto the line through b and g.
-  With x, g, b unit vectors, 1 - 1/2 ||alpha proj_L x + (1 - alpha) x - g||^2 then equals VLM-RMs'
-  1 - 1/2 ||(x - g) P||^2 with P = alpha d d^T / ||d||^2 + (1 - alpha) I.
+  the origin, applied to the vectors *as they are*. P4 and the D5 position therefore project the
+  raw (unnormalised) LIV embedding s_t onto the raw g - b; P3 projects the unit head outputs
+  f_I(s_t)/||f_I(s_t)|| onto f_L(g)/||f_L(g)|| - f_L(b)/||f_L(b)||, because the release
+  normalises the head outputs before regularising.
+- ``"line"`` (VLM-RMs, Rocamonde et al. 2024, the method's source paper): x, g and b are first
+  scaled to unit length (VLM-RMs works with unit CLIP embeddings; a line through b and g is only
+  meaningful when x, g and b share one scale) and proj_L x = b + (((x - b)·d) / (d·d)) d is the
+  projection onto the line through b and g. Then 1 - 1/2 ||alpha proj_L x + (1 - alpha) x - g||^2
+  equals VLM-RMs' 1 - 1/2 ||(x - g) P||^2 with P = alpha d d^T / ||d||^2 + (1 - alpha) I.
 
-In both forms x, g and b are first scaled to unit length, as VLM-RMs does with its (unit) CLIP
-embeddings: the 1 - 1/2 ||.||^2 form equals csim only on unit vectors (thesis 3.1.2), and the line
-through b and g is only meaningful when x, g and b share one scale (LIV embeddings are not
-normalised). The regularised vector itself is *not* renormalised: shrinking the components
-orthogonal to L is what makes the regularised reward differ from csim.
+In both forms the regularised vector itself is *not* renormalised before the head (P4) or the
+distance (P3): shrinking the components orthogonal to L is what makes the regularised reward
+differ from csim.
 """
 
 from __future__ import annotations
 
+import torch
 from torch import Tensor
 
 from temporal_torchrl.rewards.heads import RewardHeads
@@ -55,22 +58,22 @@ def cosine_similarity(x: Tensor, y: Tensor) -> Tensor:
 
 def goal_baseline_regularise(x: Tensor, goal: Tensor, baseline: Tensor, alpha: float,
                              projection: str = "origin") -> Tensor:
-    """alpha proj_L x̂ + (1 - alpha) x̂ on unit vectors x̂, ĝ, b̂ (thesis 3.1.2, eq. 4.5).
+    """alpha proj_L x + (1 - alpha) x (thesis 3.1.2, eq. 4.5), broadcast over ``x [..., D]``.
 
-    L is the direction ĝ - b̂ through the origin (``projection="origin"``) or the line through
-    b̂ and ĝ (``projection="line"``); see the module docstring.
+    ``projection="origin"``: L is the direction ``goal - baseline`` through the origin, on the
+    vectors as given (no normalisation). ``projection="line"``: x, goal and baseline are scaled to
+    unit length and L is the line through them (VLM-RMs). See the module docstring.
     """
     if projection not in PROJECTIONS:
         raise ValueError(f"projection={projection!r}; expected one of {', '.join(PROJECTIONS)}.")
-    x, goal, baseline = unit(x), unit(goal), unit(baseline)
+    if projection == "line":
+        x, goal, baseline = unit(x), unit(goal), unit(baseline)
     direction = goal - baseline
-    # g == b leaves no direction; the clamp keeps the projection finite (it becomes 0 or b̂).
+    # g == b leaves no direction; the clamp keeps the projection finite (it becomes 0 or b).
     scale_denominator = (direction @ direction).clamp_min(EPS * EPS)
-    if projection == "origin":
-        projected = ((x @ direction) / scale_denominator).unsqueeze(-1) * direction
-    else:
-        projected = baseline + (((x - baseline) @ direction) / scale_denominator).unsqueeze(
-            -1) * direction
+    offset = baseline if projection == "line" else torch.zeros_like(baseline)
+    coefficient = ((x - offset) @ direction) / scale_denominator
+    projected = offset + coefficient.unsqueeze(-1) * direction
     return alpha * projected + (1.0 - alpha) * x
 
 
@@ -122,30 +125,29 @@ def p3(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.
        projection: str = "origin", **unused) -> Tensor:
     """P3, goal-baseline regularisation after the heads (thesis 4.2.2):
     r_P3(s_t) = 1 - 1/2 ||alpha proj_L(f^P_{W_I}(s_t)) + (1 - alpha) f^P_{W_I}(s_t)
-                          - f^P_{W_L}(g)||^2
-    with L from f^P_{W_L}(g) and f^P_{W_L}(b).
+                          - f^P_{W_L}(g)||^2,
+    L from f^P_{W_L}(g) - f^P_{W_L}(b).
 
-    Computed on unit vectors u = f_I(s_t)/||f_I(s_t)||, v_g = f_L(g)/||f_L(g)||,
-    v_b = f_L(b)/||f_L(b)||: r = 1 - 1/2 ||alpha proj_L u + (1 - alpha) u - v_g||^2, with L from
-    v_g - v_b
-    (the regularised vector is not renormalised). With alpha = 0 this is FuRL's csim.
+    As in the thesis's release, the head outputs are scaled to unit length first:
+    u = f_I(s_t)/||f_I(s_t)||, v_g = f_L(g)/||f_L(g)||, v_b = f_L(b)/||f_L(b)||, and
+    r = 1 - 1/2 ||alpha proj_L u + (1 - alpha) u - v_g||^2 with L from v_g - v_b (the regularised
+    vector is not renormalised). With alpha = 0 this is FuRL's csim.
     """
-    text_goal = unit(heads.text(g))
-    regularised = goal_baseline_regularise(heads.image(s), text_goal, heads.text(b), alpha,
-                                           projection)
-    return _half_squared_distance_reward(regularised, text_goal)
+    image, goal, baseline = unit(heads.image(s)), unit(heads.text(g)), unit(heads.text(b))
+    regularised = goal_baseline_regularise(image, goal, baseline, alpha, projection)
+    return _half_squared_distance_reward(regularised, goal)
 
 
 def p4(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.4,
        projection: str = "origin", **unused) -> Tensor:
     """P4, goal-baseline regularisation before the heads (thesis 4.2.2):
     r_P4(s_t) = 1 - 1/2 ||f^P_{W_I}(alpha proj_L s_t + (1 - alpha) s_t) - f^P_{W_L}(g)||^2,
-    L from g and b.
+    L = g - b.
 
-    The regularisation runs on the unit vectors ŝ_t, ĝ, b̂ (see :func:`goal_baseline_regularise`);
-    both head outputs are then scaled to unit length before the distance, so the reward equals
-    csim(f_I(alpha proj_L ŝ_t + (1 - alpha) ŝ_t), f_L(g)). The text head reads the raw g, as in
-    FuRL.
+    The regularisation runs on the raw embeddings s_t, g and b (``projection="origin"``, as the
+    equation and the thesis's release write it). As in the release, both head outputs are then
+    scaled to unit length before the distance, so the reward equals
+    csim(f_I(alpha proj_L s_t + (1 - alpha) s_t), f_L(g)).
     """
     regularised = goal_baseline_regularise(s, g, b, alpha, projection)
     return _half_squared_distance_reward(unit(heads.image(regularised)), unit(heads.text(g)))

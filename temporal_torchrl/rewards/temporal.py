@@ -116,26 +116,37 @@ class TemporalReward(nn.Module):
                 f"dimension; the reward heads expect embedding_dim={self.embedding_dim}. Use the "
                 "encoder the TemporalReward was built for (its .dim).")
 
-    def positional_reward(self, embedding: Tensor, initial_embedding: Tensor | None = None
-                          ) -> Tensor:
-        """r^VLM_P(s_t) of the configured variant, shape ``embedding.shape[:-1]``."""
+    def positional_reward(self, embedding: Tensor, initial_embedding: Tensor | None = None,
+                          previous_embedding: Tensor | None = None) -> Tensor:
+        """r^VLM_P(s_t) of the configured variant, shape ``embedding.shape[:-1]``.
+
+        The env transform, the replay relabelling and the finetuning losses all call this (and
+        :meth:`directional_reward`), so a reward function sees the same ``s0`` and ``s_prev``
+        for the same state everywhere.
+        """
         self._check_embedding("embedding", embedding)
         if self.positional is None:
             raise ValueError("This TemporalReward has no positional part (positional=None).")
         return POSITIONAL[self.positional](
-            self.positional_heads, embedding, s0=initial_embedding, g=self.goal_embedding,
-            b=self.baseline_embedding, alpha=self.alpha, projection=self.projection)
+            self.positional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
+            g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha, position=None,
+            projection=self.projection)
 
     def directional_reward(self, embedding: Tensor, previous_embedding: Tensor,
                            initial_embedding: Tensor | None = None,
-                           position: Tensor | None = None) -> Tensor:
+                           position: Tensor | None = None, variant: str | None = None) -> Tensor:
         """r^VLM_D of the direction ``embedding - previous_embedding`` at ``position``
-        (default ``embedding``), shape ``embedding.shape[:-1]``."""
+        (default ``embedding``), shape ``embedding.shape[:-1]``.
+
+        ``variant`` scores with another registered directional function on this reward's
+        directional heads (the release's contrast terms of the directional loss); default the
+        configured one.
+        """
         self._check_embedding("embedding", embedding)
         self._check_embedding("previous_embedding", previous_embedding)
         if self.directional is None:
             raise ValueError("This TemporalReward has no directional part (directional=None).")
-        return DIRECTIONAL[self.directional](
+        return DIRECTIONAL[variant or self.directional](
             self.directional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha,
             position=position, projection=self.projection)
@@ -151,7 +162,8 @@ class TemporalReward(nn.Module):
         self._check_embedding("initial_embedding", initial_embedding)
         task = success.to(torch.float32) - 1.0
         zeros = torch.zeros_like(task)
-        positional = (self.positional_reward(embedding, initial_embedding).unsqueeze(-1)
+        positional = (self.positional_reward(embedding, initial_embedding,
+                                             previous_embedding).unsqueeze(-1)
                       if self.positional is not None else zeros)
         directional = (self.directional_reward(embedding, previous_embedding,
                                                initial_embedding).unsqueeze(-1)
