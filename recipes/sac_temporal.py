@@ -8,16 +8,20 @@ transition from the end of its episode on), then an episode row and a checkpoint
 
     python recipes/sac_temporal.py                                # quick default (offline, CPU)
     python recipes/sac_temporal.py preset=best protocol=stage2 env.task=door-open env.seed=2
-    python recipes/sac_temporal.py output_dir=runs/x resume=true  # continue a killed run
+    python recipes/sac_temporal.py preset=best protocol=stage2 resume=true  # continue a killed run
     python recipes/sac_temporal.py output_dir=runs/x resume=true train.episodes=2000  # extend it
 
-Outputs in ``output_dir``: ``episodes.csv`` (episode, env_steps, success, return = sum of sparse
+Outputs in ``output_dir`` (default: ``runs/<task>/<method>_<protocol>/seed<seed>``, see
+``utils.default_run_dir``): ``episodes.csv`` (episode, env_steps, success, return = sum of sparse
 task rewards, mean_vlm_reward, stage), ``summary.json`` (TTFS, TT50S, RAS, throughput, the
-resolved config), ``checkpoint.pt`` + ``replay/`` (resume), ``logs/`` (CSV logger) or ``wandb/``.
+resolved config, the last training metrics), ``checkpoint.pt`` + ``replay/`` (resume), ``logs/``
+(CSV logger: per-episode rows and, every ``logger.log_every`` updates, SAC's and the heads'
+losses and the relabelled reward statistics) or ``wandb/``.
 """
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from collections.abc import Collection
@@ -61,7 +65,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     run_dir = utils.check_run_dir(cfg)
     if cfg.resume:
         cfg = utils.resumed_config(cfg, run_dir, given_keys)
-        utils.import_reward_modules(cfg.reward.modules)
+        utils.validate_config(cfg)  # the saved config, continued, is the one that runs
     state = utils.load_checkpoint(run_dir) if cfg.resume else None
     torch.manual_seed(cfg.env.seed)
 
@@ -70,6 +74,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     encoder = utils.make_encoder(cfg) if vlm else None
     reward = utils.make_temporal_reward(cfg, encoder) if vlm else None
     env = utils.make_environment(cfg, encoder, reward)
+    print(f"run directory: {run_dir}")
     print(utils.describe_encoder(cfg, encoder))
     reward_transform = env.transform[-1] if vlm else None
 
@@ -97,11 +102,23 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     actor, qvalue = utils.make_sac_agent(cfg, env)
     sac_loss, target_updater, sac_optimizer = utils.make_sac_loss(
         cfg, actor, qvalue, env.action_spec.shape[-1])
-    buffer = utils.make_replay_buffer(cfg, sum(len(episode) + 1 for episode in preloaded),
-                                      capacity=None if state is None else state["buffer_capacity"])
+    expert_rows = (sum(len(episode) + 1 for episode in preloaded) if state is None
+                   else state["expert_rows"])
+    capacity = utils.replay_capacity(cfg, expert_rows)
+    if capacity - expert_rows < cfg.env.max_episode_steps + 1:
+        raise ValueError(f"config replay_buffer.capacity={capacity} is invalid: the preloaded "
+                         f"experts take {expert_rows} rows and an episode up to "
+                         f"{cfg.env.max_episode_steps + 1}; raise it (or set null).")
+    if state is not None:
+        capacity = max(capacity, state["buffer_capacity"])
+        if capacity > state["buffer_capacity"]:
+            print(f"resume: replay capacity grown from {state['buffer_capacity']:,} to "
+                  f"{capacity:,} rows for train.episodes={cfg.train.episodes}")
+    buffer = utils.make_replay_buffer(cfg, capacity)
 
     # ---- fresh start or resume
-    episode, env_steps, inserted, successes = 0, 0, 0, []
+    episode, env_steps, inserted, updates, successes = 0, 0, 0, 0, []
+    last_metrics: dict[str, float] = {}
     if state is not None:
         sac_loss.load_state_dict(state["sac_loss"])
         sac_optimizer.load_state_dict(state["sac_optimizer"])
@@ -110,8 +127,9 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         for optimizer, saved in zip(head_optimizers, state["head_optimizers"], strict=True):
             optimizer.load_state_dict(saved)
         episode, env_steps, inserted = state["episode"], state["env_steps"], state["inserted"]
+        updates, last_metrics = state["updates"], state["last_metrics"]
         successes = list(state["successes"])
-        utils.load_replay_episodes(run_dir, buffer, inserted)
+        utils.load_replay_episodes(run_dir, buffer, inserted, permanent=state["preloaded"])
         utils.truncate_episode_rows(run_dir, episode)
         utils.set_rng_state(state["rng"])
     else:
@@ -122,14 +140,18 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         utils.write_json(run_dir / "config.json", OmegaConf.to_container(cfg, resolve=True))
     logger = utils.make_logger(cfg, run_dir)
 
+    metrics = utils.MetricWindow()
+
     def update_reward_heads() -> None:
         batch = buffer.sample_finetuning(cfg.reward.batch_size, gap=cfg.reward.gap)
         for loss, optimizer in zip(losses, head_optimizers, strict=True):
-            value = loss(batch)[loss.loss_key]
+            loss_td = loss(batch)
+            value = loss_td[loss.loss_key]
             if value.requires_grad:
                 optimizer.zero_grad(set_to_none=True)
                 value.backward()
                 optimizer.step()
+            metrics.add("reward", loss_td.exclude("stage"))
 
     def update_sac() -> None:
         batch = buffer.sample(cfg.sac.batch_size)
@@ -141,6 +163,9 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         total.backward()
         sac_optimizer.step()
         target_updater.step()
+        metrics.add("sac", loss_td.select("loss_actor", "loss_qvalue", "loss_alpha", "alpha",
+                                          "entropy"))
+        metrics.add("relabelled", utils.reward_statistics(batch["next"]))
 
     # ---- training loop
     start_time, start_steps = time.perf_counter(), env_steps
@@ -163,6 +188,12 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                     update_reward_heads()
                 for _ in range(cfg.train.updates_per_step):
                     update_sac()
+                    updates += 1
+                    if updates % cfg.logger.log_every == 0:
+                        last_metrics = metrics.flush()
+                        last_metrics.update({"train/stage": 2.0 if buffer.has_positives else 1.0,
+                                             "train/positive_states": buffer.num_positive_states})
+                        utils.log_metrics(logger, last_metrics, env_steps)
             if tensordict["next", "done"].item():
                 break
             tensordict = step_mdp(tensordict)
@@ -195,9 +226,11 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                 "reward": reward.state_dict() if reward is not None else {},
                 "head_optimizers": [optimizer.state_dict() for optimizer in head_optimizers],
                 "episode": episode, "env_steps": env_steps, "inserted": inserted,
+                "updates": updates, "last_metrics": last_metrics,
                 "successes": successes, "rng": utils.rng_state(),
                 "goal_image": goal_image if finetune else None,
-                "buffer_capacity": buffer.capacity})
+                "buffer_capacity": buffer.capacity,
+                "preloaded": buffer.num_permanent_episodes, "expert_rows": expert_rows})
         if cfg.train.stop_after_episodes is not None and episode >= cfg.train.stop_after_episodes:
             bar.close()
             env.close()
@@ -217,6 +250,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         "successes": int(sum(successes)),
         "steps_per_second": (env_steps - start_steps) / max(elapsed, 1e-9),
         "encoder": cfg.encoder.name if vlm else None,
+        "updates": updates, "last_metrics": last_metrics,
         "config": OmegaConf.to_container(cfg, resolve=True),
     }
     utils.write_json(run_dir / "summary.json", summary)
@@ -228,6 +262,10 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
 
 @hydra.main(version_base=None, config_path=".", config_name="config")
 def main(cfg: DictConfig) -> None:
+    # Libraries log their progress at INFO (open_clip's model creation, TorchRL's storage); the
+    # recipe prints its own lines and a progress bar, which those would interleave with.
+    for name in ("", "torchrl"):
+        logging.getLogger(name).setLevel(logging.WARNING)
     if cfg.train.threads is not None:
         torch.set_num_threads(cfg.train.threads)
     summary = train(cfg, given_keys=utils.override_keys(HydraConfig.get().overrides.task))

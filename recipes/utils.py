@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
-from tensordict import TensorDict
+from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from tensordict.nn.distributions import NormalParamExtractor
 from torch import nn
@@ -50,6 +50,8 @@ CHECKPOINT = "checkpoint.pt"
 #: Expert episodes get the protocol's full episode length to succeed, however short training's.
 EXPERT_MAX_STEPS = 500
 REPLAY_DIR = "replay"
+#: Expert episodes the thesis preloads in its second stage (protocol=stage2).
+STAGE2_EXPERTS = 50
 
 
 # --------------------------------------------------------------------------- configuration
@@ -95,6 +97,7 @@ _NUMERIC_CHECKS = (
     ("train.checkpoint_every", *_integer(1), False),
     ("train.stop_after_episodes", *_integer(1), True),
     ("train.threads", *_integer(1), True),
+    ("logger.log_every", *_integer(1), False),
 )
 _GROUPS = ("env", "encoder", "reward", "sac", "replay_buffer", "train", "logger")
 EMBEDDING_DTYPES = ("float16", "bfloat16", "float32")
@@ -173,13 +176,12 @@ def validate_config(cfg: DictConfig) -> None:
     if cfg.replay_buffer.embedding_dtype not in EMBEDDING_DTYPES:
         raise bad("replay_buffer.embedding_dtype", cfg.replay_buffer.embedding_dtype,
                   f"one of {', '.join(EMBEDDING_DTYPES)}")
-    longest = max(cfg.env.max_episode_steps,
-                  EXPERT_MAX_STEPS if cfg.train.preload_positives else 0) + 1
+    longest = cfg.env.max_episode_steps + 1
     capacity = cfg.replay_buffer.capacity
     if capacity is not None and not (_integer(longest)[0](capacity)):
         raise bad("replay_buffer.capacity", capacity,
                   f"null (the whole run) or an integer >= {longest}, the rows of the longest "
-                  f"episode (its steps + 1; preloaded experts run up to {EXPERT_MAX_STEPS} steps)")
+                  "episode (its steps + 1), plus the rows of any preloaded experts")
     try:
         device = torch.device(cfg.encoder.device)
     except (RuntimeError, TypeError) as error:
@@ -212,9 +214,26 @@ def baseline_text(cfg: DictConfig) -> str:
 
 
 # --------------------------------------------------------------------------- run directory
+def default_run_dir(cfg: DictConfig) -> Path:
+    """``runs/<task>/<encoder>_<positional>+<directional>_rho<r>_lambda<l>_<baseline>_<protocol>
+    /seed<s>``: runs that differ in anything a preset or protocol sets (encoder, reward, rho,
+    lambda, baseline, preloaded experts) or in the seed never share a directory."""
+    if uses_vlm_reward(cfg):
+        baseline = cfg.reward.baseline
+        if baseline not in ("generic", "tailored"):
+            baseline = re.sub(r"[^A-Za-z0-9]+", "-", baseline).strip("-")[:40] or "text"
+        method = (f"{cfg.encoder.name}_{cfg.reward.positional}+{cfg.reward.directional}"
+                  f"_rho{cfg.reward.rho:g}_lambda{cfg.reward.lambda_:g}_{baseline}")
+    else:
+        method = "sac"
+    preload = cfg.train.preload_positives
+    protocol = {0: "stage1", STAGE2_EXPERTS: "stage2"}.get(preload, f"preload{preload}")
+    return Path("runs") / cfg.env.task / f"{method}_{protocol}" / f"seed{cfg.env.seed}"
+
+
 def check_run_dir(cfg: DictConfig) -> Path:
     """The run directory, checked before any work: resumable, new, or replaceable."""
-    run_dir = Path(cfg.output_dir)
+    run_dir = Path(cfg.output_dir) if cfg.output_dir is not None else default_run_dir(cfg)
     holds_files = run_dir.exists() and any(run_dir.iterdir())
     checkpointed = (run_dir / CHECKPOINT).exists()
     if cfg.resume and not checkpointed:
@@ -341,13 +360,15 @@ def make_environment(cfg: DictConfig, encoder: Encoder | None,
     return env
 
 
-def make_replay_buffer(cfg: DictConfig, expert_rows: int = 0,
-                       capacity: int | None = None) -> EpisodeReplayBuffer:
-    """Sized for the whole run (training episodes plus ``expert_rows``) unless configured."""
-    capacity = capacity or cfg.replay_buffer.capacity
-    if capacity is None:
-        capacity = min(cfg.train.episodes * (cfg.env.max_episode_steps + 1) + expert_rows,
-                       1_000_000)
+def replay_capacity(cfg: DictConfig, expert_rows: int = 0) -> int:
+    """``replay_buffer.capacity``, or (null) rows for the whole run: every training episode plus
+    ``expert_rows``, capped at 1,000,000."""
+    if cfg.replay_buffer.capacity is not None:
+        return cfg.replay_buffer.capacity
+    return min(cfg.train.episodes * (cfg.env.max_episode_steps + 1) + expert_rows, 1_000_000)
+
+
+def make_replay_buffer(cfg: DictConfig, capacity: int) -> EpisodeReplayBuffer:
     return EpisodeReplayBuffer(
         capacity, history=cfg.reward.k,
         embedding_dtype=getattr(torch, cfg.replay_buffer.embedding_dtype),
@@ -425,6 +446,39 @@ def make_adam(parameters: Iterable[nn.Parameter], lr: float) -> torch.optim.Adam
     return torch.optim.Adam(parameters, lr=lr, fused=True)
 
 
+class MetricWindow:
+    """Means of the training metrics since the last :meth:`flush` (losses, alpha, entropy,
+    reward statistics), gathered as tensors so an update never waits on ``.item()``."""
+
+    def __init__(self) -> None:
+        self._values: dict[str, list[torch.Tensor]] = {}
+
+    def add(self, prefix: str, values: TensorDictBase) -> None:
+        for key, value in values.items():
+            self._values.setdefault(f"{prefix}/{key}", []).append(value.detach().float())
+
+    def flush(self) -> dict[str, float]:
+        means = {key: torch.stack(values).mean().item() for key, values in self._values.items()}
+        self._values.clear()
+        return means
+
+
+def reward_statistics(next_batch: TensorDictBase) -> TensorDict:
+    """Mean and std of the relabelled r_P and r_D in a SAC batch (empty without a VLM reward)."""
+    stats = {}
+    for key, name in (("positional_reward", "r_P"), ("directional_reward", "r_D")):
+        if key in next_batch.keys():
+            std, mean = torch.std_mean(next_batch[key])
+            stats[f"{name}_mean"], stats[f"{name}_std"] = mean, std
+    return TensorDict(stats, [])
+
+
+def log_metrics(logger: Logger | None, metrics: dict[str, float], step: int) -> None:
+    if logger is not None:
+        for key, value in metrics.items():
+            logger.log_scalar(key, value, step=step)
+
+
 def make_logger(cfg: DictConfig, run_dir: Path) -> Logger | None:
     name = cfg.logger.exp_name or run_dir.name
     if cfg.logger.backend == "csv":
@@ -475,10 +529,14 @@ def save_replay_episode(run_dir: Path, index: int, rows: TensorDict) -> None:
     torch.save(rows.to_dict(), run_dir / REPLAY_DIR / f"{index:06d}.pt")
 
 
-def load_replay_episodes(run_dir: Path, buffer: EpisodeReplayBuffer, count: int) -> None:
+def load_replay_episodes(run_dir: Path, buffer: EpisodeReplayBuffer, count: int,
+                         permanent: int = 0) -> None:
+    """Re-insert the run's first ``count`` episodes in order; the first ``permanent`` (the
+    preloaded experts) as permanent episodes, as they were inserted."""
     for index in range(count):
         data = torch.load(run_dir / REPLAY_DIR / f"{index:06d}.pt", weights_only=True)
-        buffer.extend_rows(TensorDict(data, [data["step"].shape[0]]))
+        buffer.extend_rows(TensorDict(data, [data["step"].shape[0]]),
+                           permanent=index < permanent)
 
 
 def rng_state() -> dict:

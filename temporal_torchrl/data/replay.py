@@ -255,6 +255,11 @@ class EpisodeReplayBuffer:
         return len(self._episodes)
 
     @property
+    def num_positive_states(self) -> int:
+        """Number of positive states finetuning samples from (within ``label_window``)."""
+        return int(self._positives.numel())
+
+    @property
     def num_permanent_episodes(self) -> int:
         """Number of permanent episodes (never overwritten)."""
         return self._permanent_episodes
