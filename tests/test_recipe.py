@@ -161,7 +161,7 @@ def test_training_metrics_are_logged_and_summarised(tmp_path):
     # The positional loss is the sum of its stage-2 terms (means over the same updates).
     assert metrics["reward/loss_positional"] == pytest.approx(
         metrics["reward/loss_pos_neg"] + metrics["reward/loss_pos_pos"], rel=1e-5)
-    assert -1.0 <= metrics["relabelled/r_P_mean"] <= 1.0 and metrics["relabelled/r_D_std"] > 0
+    assert metrics["relabelled/r_P_std"] > 0 and metrics["relabelled/r_D_std"] > 0  # per state
     # alpha = exp(log_alpha): lr 1e-4 over 30 updates keeps it within 1% of alpha_init = 1.
     assert metrics["sac/alpha"] == pytest.approx(1.0, abs=0.01)
     logged = next((run_dir / "logs").rglob("sac/alpha.csv")).read_text().splitlines()
