@@ -21,6 +21,7 @@ losses and the relabelled reward statistics) or ``wandb/``.
 
 from __future__ import annotations
 
+import json
 import logging
 import sys
 import time
@@ -30,6 +31,7 @@ from pathlib import Path
 import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 from tqdm import tqdm
@@ -67,6 +69,10 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         cfg = utils.resumed_config(cfg, run_dir, given_keys)
         utils.validate_config(cfg)  # the saved config, continued, is the one that runs
     state = utils.load_checkpoint(run_dir) if cfg.resume else None
+    if state is not None and state["episode"] >= cfg.train.episodes \
+            and (run_dir / "summary.json").exists():
+        print(f"{run_dir}: already complete ({state['episode']} episodes)")
+        return json.loads((run_dir / "summary.json").read_text())
     torch.manual_seed(cfg.env.seed)
 
     # ---- encoder, reward, env
@@ -266,9 +272,12 @@ def main(cfg: DictConfig) -> None:
     # recipe prints its own lines and a progress bar, which those would interleave with.
     for name in ("", "torchrl"):
         logging.getLogger(name).setLevel(logging.WARNING)
+    hydra_config = HydraConfig.get()
+    if hydra_config.mode == RunMode.MULTIRUN:
+        cfg = utils.sweep_job_config(cfg, hydra_config)
     if cfg.train.threads is not None:
         torch.set_num_threads(cfg.train.threads)
-    summary = train(cfg, given_keys=utils.override_keys(HydraConfig.get().overrides.task))
+    summary = train(cfg, given_keys=utils.override_keys(hydra_config.overrides.task))
     if summary is not None:
         print({key: summary[key] for key in ("ttfs", "tt50s", "ras", "episodes", "env_steps",
                                               "steps_per_second")})

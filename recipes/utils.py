@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import copy
 import csv
 import importlib
 import importlib.util
 import json
+import os
 import random
 import re
 import shutil
@@ -228,7 +230,38 @@ def default_run_dir(cfg: DictConfig) -> Path:
         method = "sac"
     preload = cfg.train.preload_positives
     protocol = {0: "stage1", STAGE2_EXPERTS: "stage2"}.get(preload, f"preload{preload}")
-    return Path("runs") / cfg.env.task / f"{method}_{protocol}" / f"seed{cfg.env.seed}"
+    root = Path(cfg.runs_dir) if cfg.runs_dir is not None else Path("runs")
+    return root / cfg.env.task / f"{method}_{protocol}" / f"seed{cfg.env.seed}"
+
+
+def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
+    """One job of a ``-m`` sweep: its run directory under the sweep directory, resumed when a
+    checkpoint is there (a re-launched sweep continues its runs, finished ones return at once),
+    restarted when the job died before its first checkpoint, and torch threads set so that
+    parallel jobs share the cores instead of oversubscribing them."""
+    cfg = copy.deepcopy(cfg)
+    if cfg.runs_dir is None:
+        cfg.runs_dir = hydra_config.sweep.dir
+    run_dir = Path(cfg.output_dir) if cfg.output_dir is not None else default_run_dir(cfg)
+    if not cfg.overwrite and not cfg.resume and run_dir.exists():
+        if (run_dir / CHECKPOINT).exists():
+            cfg.resume = True
+        elif any(run_dir.iterdir()):
+            print(f"{run_dir}: no checkpoint yet, starting it over")
+            cfg.overwrite = True
+    if cfg.train.threads is None:
+        cfg.train.threads = threads_per_job(hydra_config.launcher)
+    return cfg
+
+
+def threads_per_job(launcher: DictConfig) -> int | None:
+    """Cores / parallel jobs for the joblib launcher (``n_jobs`` -1 or null: one per core);
+    None (torch's default) for the others: Slurm gives each job its own CPUs."""
+    if "n_jobs" not in launcher:
+        return None
+    cores = os.cpu_count() or 1
+    jobs = launcher.n_jobs if launcher.n_jobs not in (None, -1) and launcher.n_jobs > 0 else cores
+    return max(1, cores // min(jobs, cores))
 
 
 def check_run_dir(cfg: DictConfig) -> Path:
@@ -257,7 +290,7 @@ def check_run_dir(cfg: DictConfig) -> Path:
 
 #: Keys about this process, not the run (where and how to resume, when to stop, the progress bar,
 #: threads): a resumed run always takes their current values.
-PROCESS_KEYS = ("resume", "overwrite", "output_dir", "train.stop_after_episodes",
+PROCESS_KEYS = ("resume", "overwrite", "output_dir", "runs_dir", "train.stop_after_episodes",
                 "train.progress", "train.threads")
 #: Keys of the run a resumed run may change when they are given on the command line; every
 #: other value comes from the run's saved config.json.
