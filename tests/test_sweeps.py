@@ -1,0 +1,114 @@
+"""Sweeps on Hydra's launchers: studies compose, submitit resolves without Slurm, and a real
+two-job joblib sweep writes one run per job, resumes when re-launched, and shares the cores."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+from test_recipe import QUICK, RECIPES
+
+import utils
+
+STUDIES = {  # study: (presets, protocol, runs)
+    "table_5_2": ("furl,p2,p3,d3", "stage1", 96),
+    "table_5_4": ("sac,furl,p1,p2,p3,p4", "stage2", 144),
+    "table_5_6": ("furl,furl_rho025,furl_rho1,furl_rho2,furl_rho4", "stage2", 120),
+    "table_5_8": ("sac,furl_rho1,d3_lambda30,d3,d3_lambda150", "stage2", 120),
+    "table_5_12": ("sac,furl_rho1,d3_only,best_rho005,best,best_rho2", "stage2", 144),
+}
+
+
+def hydra_config(*overrides):
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        return compose("config", overrides=list(overrides), return_hydra_config=True)
+
+
+@pytest.mark.parametrize("study", sorted(STUDIES))
+def test_study_lists_its_table(study):
+    presets, protocol, runs = STUDIES[study]
+    params = hydra_config(f"+study={study}").hydra.sweeper.params
+    assert params["preset"] == presets and params["protocol"] == protocol
+    assert params["env.task"].split(",") == ["drawer-open", "door-open", "window-open",
+                                            "window-close", "push", "button-press-topdown"]
+    assert len(presets.split(",")) * 6 * len(params["env.seed"].split(",")) == runs
+
+
+def test_study_presets_are_the_thesis_configurations():
+    def reward(preset):
+        cfg = hydra_config(f"preset={preset}").reward
+        return cfg.positional, cfg.directional, cfg.rho, cfg.lambda_, cfg.baseline
+
+    assert reward("d3_lambda30") == ("furl", "d3", 0.05, 30.0, "tailored")
+    assert reward("d3_only") == ("none", "d3", 1.0, 4.0, "generic")
+    assert reward("best_rho005") == ("furl", "d3", 0.05, 80.0, "generic")
+    assert reward("best_rho2") == ("furl", "d3", 2.0, 2.0, "generic")
+    assert reward("furl_rho025")[:3] == ("furl", "none", 0.25)
+
+
+def test_submitit_slurm_launcher_resolves_without_slurm():
+    cfg = hydra_config("+study=table_5_12", "hydra/launcher=submitit_slurm",
+                       "hydra.launcher.partition=gpu", "hydra.launcher.gpus_per_node=1",
+                       "hydra.launcher.timeout_min=480", "hydra.launcher.array_parallelism=24")
+    launcher = OmegaConf.to_container(cfg.hydra.launcher, resolve=False)
+    assert launcher["_target_"] == (
+        "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher")
+    assert (launcher["partition"], launcher["gpus_per_node"], launcher["timeout_min"],
+            launcher["array_parallelism"]) == ("gpu", 1, 480, 24)
+    assert cfg.hydra.sweep.dir == "sweeps/table_5_12"
+
+
+def test_joblib_jobs_share_the_cores():
+    cores = os.cpu_count()
+    assert utils.threads_per_job(OmegaConf.create({"n_jobs": -1})) == 1
+    assert utils.threads_per_job(OmegaConf.create({"n_jobs": 1})) == cores
+    assert utils.threads_per_job(OmegaConf.create({"n_jobs": 2 * cores})) == 1
+    assert utils.threads_per_job(OmegaConf.create({"partition": "gpu"})) is None
+
+
+def test_a_finished_run_returns_its_summary_untouched(tmp_path, capsys):
+    import sac_temporal
+    from test_recipe import config
+
+    summary = sac_temporal.train(config(tmp_path, "train.episodes=2"))
+    path = tmp_path / "run" / "summary.json"
+    written = path.stat().st_mtime_ns
+    assert sac_temporal.train(config(tmp_path, "train.episodes=2", "resume=true")) == summary
+    assert path.stat().st_mtime_ns == written
+    assert "already complete (2 episodes)" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_two_job_joblib_sweep_runs_resumes_and_reports(tmp_path):
+    sweep = tmp_path / "sweep"
+    command = [sys.executable, str(RECIPES / "sac_temporal.py"), "-m", "hydra/launcher=joblib",
+               "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={sweep}", *QUICK,
+               "logger.backend=csv", "env.seed=0,1"]
+    first = subprocess.run([*command, "train.episodes=2"], capture_output=True, text=True,
+                           timeout=300, cwd=tmp_path)
+    assert first.returncode == 0, first.stderr[-3000:]
+    runs = sorted(path.parent for path in sweep.rglob("config.json"))
+    assert [run.relative_to(sweep).as_posix() for run in runs] == [
+        f"drawer-open/state_furl+d3_rho1_lambda4_generic_stage1/seed{seed}" for seed in (0, 1)]
+    for run in runs:
+        config = json.loads((run / "config.json").read_text())
+        assert config["train"]["threads"] == max(1, os.cpu_count() // 2)
+        assert json.loads((run / "summary.json").read_text())["episodes"] == 2
+    # The same sweep launched again with more episodes continues both runs.
+    again = subprocess.run([*command, "train.episodes=3"], capture_output=True, text=True,
+                           timeout=300, cwd=tmp_path)
+    assert again.returncode == 0, again.stderr[-3000:]
+    for run in runs:
+        rows = (run / "episodes.csv").read_text().splitlines()
+        assert [row.split(",")[0] for row in rows[1:]] == ["1", "2", "3"]
+    report = RECIPES / "report.py"
+    if report.exists():  # the report recipe turns the sweep into tables
+        out = tmp_path / "report"
+        made = subprocess.run([sys.executable, str(report), str(sweep), "--out", str(out)],
+                              capture_output=True, text=True, timeout=300)
+        assert made.returncode == 0, made.stderr[-3000:]
+        assert any(Path(out).glob("*.md"))
