@@ -110,16 +110,8 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         cfg, actor, qvalue, env.action_spec.shape[-1])
     expert_rows = (sum(len(episode) + 1 for episode in preloaded) if state is None
                    else state["expert_rows"])
-    capacity = utils.replay_capacity(cfg, expert_rows)
-    if capacity - expert_rows < cfg.env.max_episode_steps + 1:
-        raise ValueError(f"config replay_buffer.capacity={capacity} is invalid: the preloaded "
-                         f"experts take {expert_rows} rows and an episode up to "
-                         f"{cfg.env.max_episode_steps + 1}; raise it (or set null).")
-    if state is not None:
-        capacity = max(capacity, state["buffer_capacity"])
-        if capacity > state["buffer_capacity"]:
-            print(f"resume: replay capacity grown from {state['buffer_capacity']:,} to "
-                  f"{capacity:,} rows for train.episodes={cfg.train.episodes}")
+    capacity = utils.replay_capacity(cfg, expert_rows,
+                                     saved=state["buffer_capacity"] if state else None)
     buffer = utils.make_replay_buffer(cfg, capacity)
 
     # ---- fresh start or resume

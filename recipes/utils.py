@@ -393,12 +393,22 @@ def make_environment(cfg: DictConfig, encoder: Encoder | None,
     return env
 
 
-def replay_capacity(cfg: DictConfig, expert_rows: int = 0) -> int:
-    """``replay_buffer.capacity``, or (null) rows for the whole run: every training episode plus
-    ``expert_rows``, capped at 1,000,000."""
-    if cfg.replay_buffer.capacity is not None:
-        return cfg.replay_buffer.capacity
-    return min(cfg.train.episodes * (cfg.env.max_episode_steps + 1) + expert_rows, 1_000_000)
+def replay_capacity(cfg: DictConfig, expert_rows: int = 0, saved: int | None = None) -> int:
+    """Buffer rows: ``replay_buffer.capacity``, or (null) the whole run, every training episode
+    plus ``expert_rows``, capped at 1,000,000. A resumed run never shrinks its ``saved``
+    capacity, and grows it (saying so) when it was extended."""
+    capacity = cfg.replay_buffer.capacity
+    if capacity is None:
+        capacity = min(cfg.train.episodes * (cfg.env.max_episode_steps + 1) + expert_rows,
+                       1_000_000)
+    if capacity - expert_rows < cfg.env.max_episode_steps + 1:
+        raise ValueError(f"config replay_buffer.capacity={capacity} is invalid: the preloaded "
+                         f"experts take {expert_rows} rows and an episode up to "
+                         f"{cfg.env.max_episode_steps + 1}; raise it (or set null).")
+    if saved is not None and capacity > saved:
+        print(f"resume: replay capacity grown from {saved:,} to {capacity:,} rows for "
+              f"train.episodes={cfg.train.episodes}")
+    return max(capacity, saved or 0)
 
 
 def make_replay_buffer(cfg: DictConfig, capacity: int) -> EpisodeReplayBuffer:
