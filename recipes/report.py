@@ -1,0 +1,163 @@
+"""Tables and figures from any set of runs of ``sac_temporal.py``, beside the thesis's.
+
+    python recipes/report.py runs/ --out reports/all
+    python recipes/report.py runs/door-open runs/push --out reports/two --metrics sac/loss_qvalue
+    python recipes/report.py runs/ --out reports/all --figure-run runs/door-open/<config>/seed0
+
+Finds every run directory (a directory with ``config.json``) under the given directories,
+groups runs that differ only in the seed (printing the config keys that tell the groups apart)
+and writes into ``--out``:
+
+- ``ras.md``/``.csv``, ``ttfs.md``/``.csv``, ``tt50s.md``/``.csv``: tasks as rows,
+  configurations as columns, mean ± std (n seeds), Average row, best in bold; the CSV adds 95%
+  bootstrap CIs of the mean; both put the thesis's published value and the difference beside
+  the configurations it reports;
+- ``runs.csv``: every run with its episodes and metrics (or why it has none yet);
+- ``success_curves.png``: running-average success (window 150) per task and configuration;
+- ``metric_<key>.png`` for each ``--metrics`` key (from the runs' CSV or offline wandb logs);
+- ``reward_curves.png`` with ``--figure-run``: r_P and r_D along a positive and a negative
+  episode, from that run's saved heads (Figure 5.12);
+- ``report.md``: all of the above in one page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+from temporal_torchrl.experiments import (
+    METRICS,
+    build_table,
+    find_runs,
+    group_runs,
+    load_run,
+    logged_scalars,
+    reward_curves,
+)
+from temporal_torchrl.experiments.plots import (
+    plot_logged_metric,
+    plot_reward_curves,
+    plot_success_curves,
+)
+from temporal_torchrl.experiments.runs import configuration_name, configuration_settings
+from temporal_torchrl.experiments.tables import (
+    CSV_COLUMNS,
+    RUN_COLUMNS,
+    grouping_markdown,
+    run_rows,
+    table_markdown,
+    table_rows,
+    write_csv,
+)
+
+HOW_TO_READ = """\
+## How to read this report
+
+- RAS (%) is RAS(e; w = 150) at the task's budget e (thesis Table 5.1). A run short of its budget
+  is *incomplete*: shown with its episode count, never scored.
+- TTFS / TT50S are the episode of the first / 50th success. A run that reached 1,000 episodes
+  without it counts 1,000 (the thesis's convention); a shorter run without it is *censored*
+  (`> N ep`: not reached in its N episodes) and is not averaged.
+- A cell's mean ± sample std and its n are over the runs that have a value; the CSV adds the 95%
+  percentile-bootstrap CI of the mean ({resamples} resamples, seed {seed}).
+- The thesis's values are LIV's (4 seeds); runs with another encoder are compared with them
+  all the same, and the Note column says so.
+"""
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        description="Tables (RAS, TTFS, TT50S) and figures from runs of sac_temporal.py.")
+    parser.add_argument("dirs", nargs="+", type=Path,
+                        help="run directories or sweep directories containing them")
+    parser.add_argument("--out", type=Path, required=True, help="directory for the report")
+    parser.add_argument("--figure-run", type=Path, default=None,
+                        help="a run with reward heads: plot r_P and r_D along a positive and a "
+                             "negative episode (Figure 5.12)")
+    parser.add_argument("--figure-episodes", type=int, nargs=2, default=None,
+                        metavar=("POSITIVE", "NEGATIVE"),
+                        help="replay indices of the two episodes (default: the first expert, "
+                             "the last failed training episode)")
+    parser.add_argument("--metrics", nargs="*", default=[],
+                        help="logged metrics to plot, e.g. sac/loss_qvalue relabelled/r_P_mean")
+    parser.add_argument("--bootstrap", type=int, default=10_000,
+                        help="bootstrap resamples for the 95%% CIs (default 10000)")
+    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    args = parser.parse_args(argv)
+    if args.bootstrap < 1:
+        parser.error(f"--bootstrap {args.bootstrap}: expected at least 1 resample.")
+    if args.figure_episodes is not None and args.figure_run is None:
+        parser.error("--figure-episodes needs --figure-run.")
+    return args
+
+
+def import_reward_modules(run_dir: Path) -> None:
+    """Import the run's ``reward.modules`` (its own registered rewards), as the recipe does."""
+    modules = json.loads((run_dir / "config.json").read_text())["reward"].get("modules") or []
+    if modules:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import utils  # the recipe's helpers (heavy imports: only for runs that need them)
+
+        utils.import_reward_modules(modules)
+
+
+def metric_file(key: str) -> str:
+    """``sac/loss_qvalue`` -> ``metric_sac-loss_qvalue.png``."""
+    return "metric_" + re.sub(r"[^A-Za-z0-9_.]+", "-", key).strip("-") + ".png"
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    groups = group_runs(find_runs(args.dirs))
+    scalars = {run.path: logged_scalars(run.path) for group in groups for run in group.runs
+               if args.metrics}
+    logged = set().union(*scalars.values())
+    for key in args.metrics:
+        if key not in logged:
+            raise SystemExit(f"--metrics {key}: no run logged it (looked in logs/*/scalars and "
+                             f"wandb/offline-run-*); logged keys: "
+                             f"{', '.join(sorted(logged)) or 'none'}.")
+    args.out.mkdir(parents=True, exist_ok=True)
+    sections = ["# Report", "", f"Runs from: {', '.join(map(str, args.dirs))}", "",
+                HOW_TO_READ.format(resamples=args.bootstrap, seed=args.seed),
+                grouping_markdown(groups)]
+    print(grouping_markdown(groups))
+
+    for metric in METRICS:
+        table = build_table(groups, metric, resamples=args.bootstrap, seed=args.seed)
+        markdown = table_markdown(table)
+        (args.out / f"{metric}.md").write_text(markdown)
+        write_csv(args.out / f"{metric}.csv", table_rows(table), CSV_COLUMNS)
+        sections.append(markdown)
+        print(markdown)
+    write_csv(args.out / "runs.csv", run_rows(groups), RUN_COLUMNS)
+
+    figures = ["## Figures"]
+    plot_success_curves(groups, args.out / "success_curves.png")
+    figures.append("![running-average success](success_curves.png)")
+    for key in args.metrics:
+        name = metric_file(key)
+        plot_logged_metric(groups, scalars, key, args.out / name)
+        figures.append(f"![{key}]({name})")
+    if args.figure_run is not None:
+        import_reward_modules(args.figure_run)
+        episodes = args.figure_episodes or (None, None)
+        positive, negative = reward_curves(args.figure_run, *episodes)
+        run = load_run(args.figure_run)
+        title = (f"{configuration_name(configuration_settings(run))}, {run.task}, seed "
+                 f"{run.seed}: heads of the last checkpoint")
+        plot_reward_curves(positive, negative, args.out / "reward_curves.png", title)
+        figures.append(f"![r_P and r_D along a positive and a negative episode]"
+                       f"(reward_curves.png)\n\n{title}; positive: replay {positive.index} "
+                       f"({positive.kind}), negative: replay {negative.index} ({negative.kind}).")
+    sections.append("\n\n".join(figures) + "\n")
+    (args.out / "report.md").write_text("\n".join(sections))
+    print(f"wrote {args.out}: report.md, {', '.join(f'{m}.md/.csv' for m in METRICS)}, "
+          "runs.csv and the figures")
+
+
+if __name__ == "__main__":
+    main()

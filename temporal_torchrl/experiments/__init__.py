@@ -1,0 +1,58 @@
+"""Reports over runs of ``recipes/sac_temporal.py``: the thesis's tables and figures.
+
+- :mod:`~temporal_torchrl.experiments.runs`: find run directories, read them, group them into
+  configurations (runs that differ only in the seed).
+- :mod:`~temporal_torchrl.experiments.aggregate`: per-run RAS / TTFS / TT50S (or why a run has
+  none yet), mean, std and bootstrap CIs over seeds, the thesis-layout tables.
+- :mod:`~temporal_torchrl.experiments.published`: the thesis's Tables 5.2-5.12 as data, matched
+  to run configurations.
+- :mod:`~temporal_torchrl.experiments.tables`: Markdown and CSV output.
+- :mod:`~temporal_torchrl.experiments.logs`: logged training metrics (CSV logs, offline wandb).
+- :mod:`~temporal_torchrl.experiments.reward_curves`: r_P and r_D along stored episodes with a
+  run's saved heads (Figure 5.12).
+- :mod:`~temporal_torchrl.experiments.plots`: the figures (matplotlib; imported on its own).
+
+``recipes/report.py`` puts them together.
+"""
+
+from temporal_torchrl.experiments.aggregate import (
+    METRICS,
+    Cell,
+    MetricTable,
+    RunValue,
+    bootstrap_ci,
+    build_table,
+    run_value,
+)
+from temporal_torchrl.experiments.logs import Series, logged_scalars
+from temporal_torchrl.experiments.published import (
+    Configuration,
+    PublishedResult,
+    find_published,
+    published_tables,
+)
+from temporal_torchrl.experiments.reward_curves import EpisodeRewards, reward_curves
+from temporal_torchrl.experiments.runs import Run, RunGroup, find_runs, group_runs, load_run
+
+__all__ = [
+    "METRICS",
+    "Cell",
+    "Configuration",
+    "EpisodeRewards",
+    "MetricTable",
+    "PublishedResult",
+    "Run",
+    "RunGroup",
+    "RunValue",
+    "Series",
+    "bootstrap_ci",
+    "build_table",
+    "find_published",
+    "find_runs",
+    "group_runs",
+    "load_run",
+    "logged_scalars",
+    "published_tables",
+    "reward_curves",
+    "run_value",
+]

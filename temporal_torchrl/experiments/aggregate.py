@@ -1,0 +1,230 @@
+"""Per-run metrics and their aggregation over seeds: the cells of the thesis's tables.
+
+Each run gives a metric only when it has it (:func:`run_value`):
+
+- RAS (in %, as the thesis's tables) once the run has reached its task's budget e; before that
+  the run is *incomplete* and shows its episode count. Tasks without a budget have no RAS.
+- TTFS / TT50S: the episode of the first / 50th success. A run that reached 1,000 episodes
+  (the thesis's horizon) without it scores 1,000, the thesis's convention; a shorter run without
+  it is *censored*: its value is only known to exceed its episode count, and it is shown so.
+
+A cell (one configuration on one task) holds the runs' values: the mean, the sample std (n - 1)
+and a 95% percentile-bootstrap confidence interval of the mean, over the runs that have a value;
+runs without one are listed with the cell, never averaged in. The Average row is the mean of the
+task means, as in the thesis, given only when a configuration has complete cells on every task
+of the table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from temporal_torchrl.envs import get_task
+from temporal_torchrl.experiments.published import (
+    Configuration,
+    PublishedResult,
+    find_published,
+)
+from temporal_torchrl.experiments.runs import Run, RunGroup, order_tasks
+from temporal_torchrl.metrics import DEFAULT_HORIZON, DEFAULT_WINDOW, ras, time_to_successes
+
+#: A run has the metric.
+VALUE = "value"
+#: RAS: the run has not reached its task's budget yet.
+INCOMPLETE = "incomplete"
+#: TTFS / TT50S: not reached within a run shorter than the horizon.
+CENSORED = "censored"
+#: RAS of a task with no budget (only the thesis's six tasks have one).
+UNDEFINED = "undefined"
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One of the thesis's metrics: its key, title, direction and printed precision."""
+
+    name: str
+    title: str
+    higher_is_better: bool
+    decimals: int
+
+
+METRICS = {
+    "ras": Metric("ras", "RAS (%)", higher_is_better=True, decimals=1),
+    "ttfs": Metric("ttfs", "TTFS (episodes)", higher_is_better=False, decimals=0),
+    "tt50s": Metric("tt50s", "TT50S (episodes)", higher_is_better=False, decimals=0),
+}
+#: Successes TTFS and TT50S wait for.
+SUCCESS_COUNTS = {"ttfs": 1, "tt50s": 50}
+
+
+@dataclass(frozen=True)
+class RunValue:
+    """A run's value of a metric, or why it has none (``status``)."""
+
+    run: Run
+    value: float | None
+    status: str
+    budget: int | None = None
+
+    def describe(self) -> str:
+        """The value, or why there is none: ``120/300 episodes`` (incomplete), ``> 85 episodes``
+        (censored), ``no RAS budget``."""
+        if self.status == INCOMPLETE:
+            return f"{self.run.episodes}/{self.budget} episodes"
+        if self.status == CENSORED:
+            return f"> {self.run.episodes} episodes"
+        if self.status == UNDEFINED:
+            return f"no RAS budget for {self.run.task}"
+        return f"{self.value:g}"
+
+
+def ras_window(budget: int, window: int = DEFAULT_WINDOW) -> int:
+    """The thesis's window, shortened to the budget when the budget is smaller."""
+    return min(window, budget)
+
+
+def run_value(run: Run, metric: str, *, window: int = DEFAULT_WINDOW,
+              horizon: int = DEFAULT_HORIZON) -> RunValue:
+    """``run``'s ``metric`` (``"ras"``, ``"ttfs"``, ``"tt50s"``) from its episodes (see module
+    doc); RAS in %."""
+    if metric == "ras":
+        budget = get_task(run.task).ras_budget
+        if budget is None:
+            return RunValue(run, None, UNDEFINED)
+        value = ras(run.successes, budget, ras_window(budget, window))
+        if value is None:
+            return RunValue(run, None, INCOMPLETE, budget)
+        return RunValue(run, 100.0 * value, VALUE, budget)
+    if metric not in SUCCESS_COUNTS:
+        raise ValueError(f"unknown metric {metric!r}; expected one of {', '.join(METRICS)}.")
+    count = SUCCESS_COUNTS[metric]
+    reached = sum(run.successes[:horizon]) >= count
+    if not reached and run.episodes < horizon:
+        return RunValue(run, None, CENSORED)
+    return RunValue(run, float(time_to_successes(run.successes, count, horizon)), VALUE)
+
+
+def bootstrap_ci(samples: Sequence[Sequence[float]], *, resamples: int = 10_000,
+                 seed: int = 0, level: float = 0.95) -> tuple[float, float] | None:
+    """Percentile-bootstrap confidence interval of the mean of the samples' means.
+
+    Each sample (a task's seeds) is resampled with replacement on its own, ``resamples`` times,
+    with ``numpy.random.default_rng(seed)``: the same inputs and seed give the same interval.
+    One sample is the plain CI of its mean; several give the CI of the Average row. None when
+    a sample has fewer than 2 values (no spread to resample).
+    """
+    arrays = [np.asarray(sample, dtype=float) for sample in samples]
+    if not arrays or any(array.size < 2 for array in arrays):
+        return None
+    rng = np.random.default_rng(seed)
+    means = np.zeros(resamples)
+    for array in arrays:
+        picks = rng.integers(0, array.size, size=(resamples, array.size))
+        means += array[picks].mean(axis=1)
+    means /= len(arrays)
+    tail = 100.0 * (1.0 - level) / 2.0
+    low, high = np.percentile(means, [tail, 100.0 - tail])
+    return float(low), float(high)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One configuration on one task: its runs' values and their statistics.
+
+    ``mean``, ``std`` (sample, n - 1) and ``ci`` are over the runs with a value (``std`` None
+    below 2 values, all None without any); ``pending`` lists the runs without one.
+    """
+
+    runs: tuple[RunValue, ...]
+    mean: float | None
+    std: float | None
+    ci: tuple[float, float] | None
+
+    @property
+    def values(self) -> list[float]:
+        return [run.value for run in self.runs if run.status == VALUE]
+
+    @property
+    def pending(self) -> list[RunValue]:
+        return [run for run in self.runs if run.status != VALUE]
+
+    @property
+    def complete(self) -> bool:
+        """Every run has a value (the cell can be compared and averaged)."""
+        return bool(self.runs) and not self.pending
+
+
+def make_cell(runs: Sequence[Run], metric: str, *, resamples: int = 10_000,
+              seed: int = 0) -> Cell:
+    """The cell of ``runs`` (one configuration, one task) for ``metric``."""
+    values = [run_value(run, metric) for run in runs]
+    present = [value.value for value in values if value.status == VALUE]
+    return Cell(tuple(values),
+                mean=float(np.mean(present)) if present else None,
+                std=float(np.std(present, ddof=1)) if len(present) > 1 else None,
+                ci=bootstrap_ci([present], resamples=resamples, seed=seed))
+
+
+@dataclass(frozen=True)
+class Average:
+    """The Average row of one configuration: mean of its task means, and its bootstrap CI."""
+
+    mean: float
+    ci: tuple[float, float] | None
+
+
+@dataclass(frozen=True)
+class MetricTable:
+    """One metric over run groups: tasks as rows, configurations as columns (the thesis's
+    layout), with the thesis's published values for the configurations it reports.
+
+    Attributes:
+        cells: ``(task, label) -> Cell`` where the configuration has runs on that task.
+        averages: ``label -> Average`` for configurations complete on every task.
+        published: ``label -> PublishedResult`` for configurations the thesis reports.
+    """
+
+    metric: Metric
+    tasks: tuple[str, ...]
+    groups: tuple[RunGroup, ...]
+    cells: dict[tuple[str, str], Cell]
+    averages: dict[str, Average]
+    published: dict[str, PublishedResult]
+
+    def best(self, task: str | None) -> set[str]:
+        """Labels with the best complete value of a row (``None``: the Average row); values
+        are compared as printed, so ties are all best."""
+        if task is None:
+            means = {label: average.mean for label, average in self.averages.items()}
+        else:
+            means = {group.label: self.cells[task, group.label].mean for group in self.groups
+                     if (task, group.label) in self.cells
+                     and self.cells[task, group.label].complete}
+        if not means:
+            return set()
+        rounded = {label: round(mean, self.metric.decimals) for label, mean in means.items()}
+        best = (max if self.metric.higher_is_better else min)(rounded.values())
+        return {label for label, mean in rounded.items() if mean == best}
+
+
+def build_table(groups: Sequence[RunGroup], metric: str, *, resamples: int = 10_000,
+                seed: int = 0) -> MetricTable:
+    """The table of ``metric`` over ``groups`` (see module doc)."""
+    tasks = tuple(order_tasks(run.task for group in groups for run in group.runs))
+    cells, averages, published = {}, {}, {}
+    for group in groups:
+        for task in group.tasks:
+            cells[task, group.label] = make_cell(group.runs_for(task), metric,
+                                                 resamples=resamples, seed=seed)
+        own = [cells.get((task, group.label)) for task in tasks]
+        if all(cell is not None and cell.complete for cell in own):
+            averages[group.label] = Average(
+                float(np.mean([cell.mean for cell in own])),
+                bootstrap_ci([cell.values for cell in own], resamples=resamples, seed=seed))
+        result = find_published(Configuration.from_settings(group.settings), metric)
+        if result is not None:
+            published[group.label] = result
+    return MetricTable(METRICS[metric], tasks, tuple(groups), cells, averages, published)

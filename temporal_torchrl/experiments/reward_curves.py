@@ -1,0 +1,171 @@
+"""r_P and r_D along stored episodes, computed with a run's saved reward heads (Figure 5.12).
+
+A run directory keeps its reward (``checkpoint.pt``: ``"reward"``, the
+:class:`~temporal_torchrl.rewards.TemporalReward` state with the goal and baseline text
+embeddings and the heads as they were at the last checkpoint) and every inserted episode
+(``replay/NNNNNN.pt``, in insertion order, the first ``"preloaded"`` ones the expert episodes).
+The reward is rebuilt from ``config.json`` and that state, and scores each state s_t of an
+episode with the history the env gives it: s_0 the episode's first state and s_{t-k} the state k
+steps back (s_0 while t < k).
+
+Example:
+    >>> positive, negative = reward_curves("runs/door-open/.../seed0")  # doctest: +SKIP
+    >>> positive.kind, positive.positional[:3]                          # doctest: +SKIP
+    ('expert', array([0.12, 0.13, 0.15], dtype=float32))
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from temporal_torchrl.data import NEGATIVE
+from temporal_torchrl.experiments.runs import CONFIG_FILE, none_if_none
+from temporal_torchrl.rewards import TemporalReward
+
+CHECKPOINT_FILE = "checkpoint.pt"
+REPLAY_DIR = "replay"
+EXPERT = "expert"
+SUCCESSFUL = "successful training episode"
+FAILED = "failed training episode"
+
+
+@dataclass(frozen=True)
+class EpisodeRewards:
+    """The rewards of one stored episode at its states s_1 .. s_T (the rewards its
+    transitions received).
+
+    Attributes:
+        index: the episode's position in ``replay/`` (insertion order).
+        kind: :data:`EXPERT`, :data:`SUCCESSFUL` or :data:`FAILED`.
+        steps: ``1 .. T``.
+        positional, directional: r_P and r_D at those steps (None for an absent part).
+        first_success: the first step with the success flag set, or None.
+    """
+
+    index: int
+    kind: str
+    steps: np.ndarray
+    positional: np.ndarray | None
+    directional: np.ndarray | None
+    first_success: int | None
+
+
+def load_reward(run_dir: str | Path) -> tuple[TemporalReward, dict]:
+    """The run's reward with its saved heads, and its checkpoint (for ``"preloaded"``,
+    ``"inserted"`` and ``"episode"``).
+
+    Rewards registered by the run's ``reward.modules`` must be imported first.
+    """
+    run_dir = Path(run_dir)
+    path = run_dir / CHECKPOINT_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} has no {CHECKPOINT_FILE}: the reward heads are saved "
+                                "there after each checkpointed episode.")
+    config = json.loads((run_dir / CONFIG_FILE).read_text())["reward"]
+    checkpoint = torch.load(path, weights_only=True, map_location="cpu")
+    state = checkpoint["reward"]
+    if not state:
+        raise ValueError(f"{run_dir} has no VLM reward (reward.positional and "
+                         "reward.directional are none): there are no r_P, r_D to plot.")
+    goal, baseline = state["goal_embedding"], state["baseline_embedding"]
+    reward = TemporalReward(
+        goal.shape[-1], goal, baseline, positional=none_if_none(config["positional"]),
+        directional=none_if_none(config["directional"]), rho=config["rho"],
+        lambda_=config["lambda_"], k=config["k"], alpha=config["alpha"],
+        projection=config["projection"])
+    reward.load_state_dict(state)
+    return reward.eval(), checkpoint
+
+
+def episode_rewards(reward: TemporalReward,
+                    embeddings: torch.Tensor) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """r_P and r_D (None for an absent part) at every state of one episode's embeddings
+    ``[T + 1, D]`` (state 0 included), each with s_0 and s_{t-k} as the env gives them."""
+    embeddings = embeddings.float()
+    steps = torch.arange(embeddings.shape[0])
+    previous = embeddings[torch.clamp(steps - reward.k, min=0)]
+    initial = embeddings[:1].expand_as(embeddings)
+    with torch.no_grad():
+        positional = (reward.positional_reward(embeddings, initial, previous).numpy()
+                      if reward.positional is not None else None)
+        directional = (reward.directional_reward(embeddings, previous, initial).numpy()
+                       if reward.directional is not None else None)
+    return positional, directional
+
+
+def load_episode(run_dir: str | Path, index: int) -> dict[str, torch.Tensor]:
+    """The stored rows of the run's ``index``-th inserted episode."""
+    path = Path(run_dir) / REPLAY_DIR / f"{index:06d}.pt"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist: no episode {index} in the replay.")
+    episode = torch.load(path, weights_only=True)
+    if "embedding" not in episode:
+        raise ValueError(f"{path} stores no embeddings: the run has no VLM reward.")
+    return episode
+
+
+def episode_kind(episode: dict[str, torch.Tensor], index: int, preloaded: int) -> str | None:
+    """:data:`EXPERT` (preloaded), :data:`SUCCESSFUL`, :data:`FAILED` (every labelled state
+    negative), or None (a training episode neither: not possible with the recipe's labels)."""
+    if index < preloaded:
+        return EXPERT
+    if bool(episode["success"][1:].any()):
+        return SUCCESSFUL
+    if bool((episode["label"][1:] == NEGATIVE).all()):
+        return FAILED
+    return None
+
+
+def _rewards(reward: TemporalReward, episode: dict[str, torch.Tensor], index: int,
+             kind: str) -> EpisodeRewards:
+    positional, directional = episode_rewards(reward, episode["embedding"])
+    success = torch.nonzero(episode["success"].reshape(-1)[1:]).reshape(-1)
+    return EpisodeRewards(
+        index, kind, np.arange(1, episode["embedding"].shape[0]),
+        positional[1:] if positional is not None else None,
+        directional[1:] if directional is not None else None,
+        int(success[0]) + 1 if success.numel() else None)
+
+
+def reward_curves(run_dir: str | Path, positive: int | None = None,
+                  negative: int | None = None) -> tuple[EpisodeRewards, EpisodeRewards]:
+    """r_P and r_D along one positive and one negative episode of the run, with its saved heads.
+
+    ``positive`` / ``negative`` are replay indices; by default the first expert episode (else
+    the last successful training episode) and the last failed training episode before the
+    checkpoint. Raises ``ValueError`` when the run has no such episode, or when a given index is
+    not of its kind.
+    """
+    reward, checkpoint = load_reward(run_dir)
+    preloaded, inserted = checkpoint["preloaded"], checkpoint["inserted"]
+    wanted = {"positive": (positive, (EXPERT, SUCCESSFUL)), "negative": (negative, (FAILED,))}
+    chosen = []
+    for role, (index, kinds) in wanted.items():
+        if index is not None:
+            if not 0 <= index < inserted:
+                raise ValueError(f"{role} episode {index} is not in {run_dir}'s replay "
+                                 f"(0..{inserted - 1} at its checkpoint).")
+            episode = load_episode(run_dir, index)
+            kind = episode_kind(episode, index, preloaded)
+            if kind not in kinds:
+                raise ValueError(f"replay episode {index} of {run_dir} is a {kind}, not a "
+                                 f"{role} episode ({' or '.join(kinds)}).")
+            chosen.append(_rewards(reward, episode, index, kind))
+            continue
+        order = (range(preloaded) if role == "positive" and preloaded else
+                 range(inserted - 1, preloaded - 1, -1))
+        for candidate in order:
+            episode = load_episode(run_dir, candidate)
+            kind = episode_kind(episode, candidate, preloaded)
+            if kind in kinds:
+                chosen.append(_rewards(reward, episode, candidate, kind))
+                break
+        else:
+            raise ValueError(f"{run_dir} has no {role} episode ({' or '.join(kinds)}) among its "
+                             f"{inserted} stored episodes.")
+    return chosen[0], chosen[1]

@@ -1,0 +1,346 @@
+"""Run directories of ``recipes/sac_temporal.py``: finding them, reading them, grouping them.
+
+A run directory is any directory holding a ``config.json`` (the recipe writes it before the
+first episode); a sweep directory is any tree that contains run directories. A run's episodes
+come from its ``episodes.csv``, one row per finished episode, which a killed or still running
+run has too; ``summary.json`` is there only once the run has finished.
+
+Runs are grouped into *configurations*: runs whose configs are equal once the seed, the task and
+the keys about the process that ran them (:data:`PROCESS_KEYS`) are left out. Seeds of one
+configuration are averaged; runs that differ in anything else never are.
+
+Example:
+    >>> runs = find_runs(["runs/door-open"])                       # doctest: +SKIP
+    >>> [(group.label, len(group.runs)) for group in group_runs(runs)]  # doctest: +SKIP
+    [('FuRL ρ=0.05', 4), ('FuRL ρ=1', 4)]
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from temporal_torchrl.envs import EVALUATION_TASKS
+
+CONFIG_FILE = "config.json"
+EPISODES_FILE = "episodes.csv"
+SUMMARY_FILE = "summary.json"
+
+#: Config keys about the process that ran a run, not about the run: where it wrote, whether it
+#: resumed, when it stopped, its progress bar and threads, its episode target and checkpoint
+#: interval (a run extended with ``train.episodes`` is the same run, longer), the encoder's
+#: device, and the logger. Runs that differ only in these (and the seed) are one configuration.
+PROCESS_KEYS = ("output_dir", "resume", "overwrite", "train.stop_after_episodes",
+                "train.progress", "train.threads", "train.episodes", "train.checkpoint_every",
+                "encoder.device")
+#: Key prefixes left out like :data:`PROCESS_KEYS` (``logger.*``).
+PROCESS_PREFIXES = ("logger.",)
+#: Last key component left out wherever it appears (a sweep launcher's ``runs_dir``).
+PROCESS_LEAVES = ("runs_dir",)
+#: Keys that tell the runs of one configuration apart, or put them in different table rows.
+RUN_KEYS = ("env.seed", "env.task")
+
+#: Preloaded expert episodes of each protocol of the thesis (section 5.1).
+PROTOCOLS = {0: "stage1", 50: "stage2"}
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"reward": {"rho": 1.0}}`` -> ``{"reward.rho": 1.0}`` (lists stay values)."""
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}.{key}" if prefix else str(key)
+        if isinstance(value, Mapping) and value:
+            flat.update(flatten(value, name))
+        else:
+            flat[name] = value
+    return flat
+
+
+def is_process_key(key: str) -> bool:
+    """Whether ``key`` (dotted) is about the process rather than the run (see module doc)."""
+    return (key in PROCESS_KEYS or key.startswith(PROCESS_PREFIXES)
+            or key.rsplit(".", 1)[-1] in PROCESS_LEAVES)
+
+
+def none_if_none(value: Any) -> str | None:
+    """The recipe's spelling of an absent reward part: ``None`` or the string ``"none"``."""
+    return None if value is None or str(value).lower() == "none" else str(value)
+
+
+def protocol_name(preload_positives: int) -> str:
+    """``stage1`` (no preloaded episodes), ``stage2`` (50), else ``preload<N>``."""
+    return PROTOCOLS.get(preload_positives, f"preload{preload_positives}")
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run directory as read from disk.
+
+    Attributes:
+        path: the run directory.
+        config: its ``config.json`` (the resolved config it ran with).
+        successes: ``z_1, z_2, ...`` from ``episodes.csv`` (one per finished episode).
+        summary: its ``summary.json``, or None while it runs or after it was killed. A run
+            extended with ``resume=true train.episodes=...`` keeps its old summary while it runs
+            on, so :attr:`finished` also checks the summary's episode count.
+    """
+
+    path: Path
+    config: dict[str, Any]
+    successes: tuple[bool, ...]
+    summary: dict[str, Any] | None
+
+    @property
+    def task(self) -> str:
+        return self.setting("env.task")
+
+    @property
+    def seed(self) -> int:
+        return self.setting("env.seed")
+
+    @property
+    def episodes(self) -> int:
+        return len(self.successes)
+
+    @property
+    def finished(self) -> bool:
+        """Whether the run wrote its summary after its last episode (and is not running on)."""
+        return self.summary is not None and self.summary.get("episodes") == self.episodes
+
+    def setting(self, key: str) -> Any:
+        """The config value at dotted ``key``; a clear error when the config lacks it."""
+        value: Any = self.config
+        for part in key.split("."):
+            if not isinstance(value, Mapping) or part not in value:
+                raise ValueError(f"{self.path / CONFIG_FILE} has no {key!r}: is it a config "
+                                 "written by recipes/sac_temporal.py?")
+            value = value[part]
+        return value
+
+
+def read_successes(path: Path) -> tuple[bool, ...]:
+    """The ``success`` column of an ``episodes.csv`` (empty when the file does not exist)."""
+    if not path.exists():
+        return ()
+    with path.open(newline="") as file:
+        reader = csv.DictReader(file)
+        if reader.fieldnames is None:
+            return ()
+        if "success" not in reader.fieldnames or "episode" not in reader.fieldnames:
+            raise ValueError(f"{path} has columns {reader.fieldnames}; expected the recipe's "
+                             "episode, env_steps, success, ... columns.")
+        successes = []
+        for number, row in enumerate(reader, start=1):
+            if row["episode"] != str(number) or row["success"] not in ("0", "1"):
+                raise ValueError(f"{path}: row {number} reads episode={row['episode']!r}, "
+                                 f"success={row['success']!r}; expected episode {number} and "
+                                 "success 0 or 1 (episodes in order, none missing).")
+            successes.append(row["success"] == "1")
+    return tuple(successes)
+
+
+def load_run(path: str | Path) -> Run:
+    """Read one run directory (``config.json``, ``episodes.csv``, ``summary.json`` if any)."""
+    path = Path(path)
+    config_path = path / CONFIG_FILE
+    if not config_path.is_file():
+        raise FileNotFoundError(f"{path} is not a run directory: it has no {CONFIG_FILE}.")
+    config = json.loads(config_path.read_text())
+    summary_path = path / SUMMARY_FILE
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else None
+    run = Run(path, config, read_successes(path / EPISODES_FILE), summary)
+    for key in RUN_KEYS:
+        run.setting(key)  # fail here, naming the file, rather than while grouping
+    return run
+
+
+def find_runs(paths: Iterable[str | Path]) -> list[Run]:
+    """Every run directory in or under ``paths`` (each a run or a sweep directory), sorted."""
+    found: dict[Path, None] = {}
+    for path in map(Path, paths):
+        if not path.is_dir():
+            raise FileNotFoundError(f"{path} is not a directory; pass run directories or sweep "
+                                    "directories that contain them.")
+        configs = [path / CONFIG_FILE] if (path / CONFIG_FILE).is_file() else sorted(
+            path.rglob(CONFIG_FILE))
+        if not configs:
+            raise FileNotFoundError(f"no run directory in {path}: looked for {CONFIG_FILE} in it "
+                                    "and in every directory below it (recipes/sac_temporal.py "
+                                    "writes one into each run directory).")
+        for config in configs:
+            found[config.parent.resolve()] = None
+    return [load_run(path) for path in sorted(found)]
+
+
+def configuration_settings(run: Run) -> dict[str, Any]:
+    """The run's flattened config without the seed, the task and the process keys."""
+    return {key: value for key, value in flatten(run.config).items()
+            if key not in RUN_KEYS and not is_process_key(key)}
+
+
+def _rho(value: float) -> str:
+    return f"{value:g}"
+
+
+def configuration_name(settings: Mapping[str, Any], *, encoder: bool = False,
+                       protocol: bool = False) -> str:
+    """A thesis-like name: ``SAC``, ``FuRL ρ=0.05``, ``FuRL ρ=1 + D3 λ=4 (b_g)``, ``P2 ρ=0.05
+    (b_t)``; the encoder and the protocol added when asked (they vary among the runs shown).
+
+    The baseline is named for the rewards that read it (P1-P4 and the directional ones):
+    ``b_g`` generic, ``b_t`` tailored, else the text.
+    """
+    positional = none_if_none(settings.get("reward.positional"))
+    directional = none_if_none(settings.get("reward.directional"))
+    parts = []
+    if positional is None and directional is None:
+        parts.append("SAC")
+    else:
+        rho = f"ρ={_rho(settings['reward.rho'])}"
+        names = {"furl": "FuRL", "liv": "LIV"}
+        if positional is not None:
+            parts.append(f"{names.get(positional, positional.upper())} {rho}")
+        if directional is not None:
+            term = f"{directional.upper()} λ={_rho(settings['reward.lambda_'])}"
+            parts.append(f"+ {term}" if positional is not None else f"{term} {rho}")
+        baseline = settings.get("reward.baseline")
+        if uses_baseline(positional, directional):
+            parts.append({"generic": "(b_g)", "tailored": "(b_t)"}.get(baseline,
+                                                                       f"(b: {baseline!r})"))
+        if encoder:
+            parts.append(f"[{settings.get('encoder.name')}]")
+    if protocol:
+        parts.append(f"[{protocol_name(settings.get('train.preload_positives', 0))}]")
+    return " ".join(parts)
+
+
+#: Positional rewards that do not read the baseline text (FuRL, zero-shot LIV).
+BASELINE_FREE_POSITIONAL = ("furl", "liv")
+
+
+def uses_baseline(positional: str | None, directional: str | None) -> bool:
+    """Whether the reward reads the baseline text b (P1-P4 and every directional reward)."""
+    return directional is not None or (positional is not None
+                                       and positional not in BASELINE_FREE_POSITIONAL)
+
+
+@dataclass(frozen=True)
+class RunGroup:
+    """The runs of one configuration (all tasks, all seeds).
+
+    Attributes:
+        label: the name shown in tables and legends (unique among the groups reported).
+        settings: the shared flattened config (:func:`configuration_settings`).
+        runs: its runs, sorted by task then seed.
+    """
+
+    label: str
+    settings: dict[str, Any]
+    runs: tuple[Run, ...] = field(repr=False)
+
+    @property
+    def tasks(self) -> list[str]:
+        return order_tasks({run.task for run in self.runs})
+
+    def runs_for(self, task: str) -> list[Run]:
+        return [run for run in self.runs if run.task == task]
+
+
+def task_order(task: str) -> tuple[int, str]:
+    """Sort key: the thesis's six tasks in its order, then any other task alphabetically."""
+    return ((EVALUATION_TASKS.index(task), "") if task in EVALUATION_TASKS
+            else (len(EVALUATION_TASKS), task))
+
+
+def order_tasks(tasks: Iterable[str]) -> list[str]:
+    """``tasks`` without repeats, in :func:`task_order`."""
+    return sorted(set(tasks), key=task_order)
+
+
+def _canonical(value: Any) -> Any:
+    """``1.0`` and ``1`` alike (``reward.rho=1`` on the command line, ``1.0`` in a preset)."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    if isinstance(value, list | tuple):
+        return [_canonical(each) for each in value]
+    return value
+
+
+def _frozen(settings: Mapping[str, Any]) -> str:
+    return json.dumps({key: _canonical(value) for key, value in settings.items()},
+                      sort_keys=True)
+
+
+def _same(first: Any, second: Any) -> bool:
+    if isinstance(first, float) or isinstance(second, float):
+        return (isinstance(first, int | float) and isinstance(second, int | float)
+                and math.isclose(first, second))
+    return first == second
+
+
+def distinguishing_keys(settings: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The keys whose values are not the same in all of ``settings`` (missing counts)."""
+    keys = sorted(set().union(*settings)) if settings else []
+    missing = object()
+    return [key for key in keys
+            if any(not _same(each.get(key, missing), settings[0].get(key, missing))
+                   for each in settings[1:])]
+
+
+def group_runs(runs: Sequence[Run]) -> list[RunGroup]:
+    """Group ``runs`` by configuration (see module doc), with unique thesis-like labels.
+
+    Raises ``ValueError`` when two runs share configuration, task and seed: averaging both would
+    count that seed twice.
+    """
+    by_settings: dict[str, list[Run]] = {}
+    for run in runs:
+        by_settings.setdefault(_frozen(configuration_settings(run)), []).append(run)
+    settings = [configuration_settings(members[0]) for members in by_settings.values()]
+    # SAC reads no embedding, so its encoder.name says nothing about it.
+    several_encoders = len({each.get("encoder.name") for each in settings if uses_vlm(each)}) > 1
+    several_protocols = len({each.get("train.preload_positives") for each in settings}) > 1
+    labels = [configuration_name(each, encoder=several_encoders, protocol=several_protocols)
+              for each in settings]
+    for label in set(labels):
+        clashing = [index for index, each in enumerate(labels) if each == label]
+        if len(clashing) > 1:
+            keys = distinguishing_keys([settings[index] for index in clashing])
+            for index in clashing:
+                values = ", ".join(f"{key}={settings[index].get(key)}" for key in keys)
+                labels[index] = f"{label} [{values}]"
+    groups = []
+    for label, each, members in zip(labels, settings, by_settings.values(), strict=True):
+        members = sorted(members, key=lambda run: (task_order(run.task), run.seed))
+        seen: dict[tuple[str, int], Path] = {}
+        for run in members:
+            other = seen.setdefault((run.task, run.seed), run.path)
+            if other != run.path:
+                raise ValueError(f"{other} and {run.path} are the same configuration, task and "
+                                 f"seed ({run.task}, seed {run.seed}); averaging both would count "
+                                 "that seed twice. Report one of them (pass the directories to "
+                                 "use).")
+        groups.append(RunGroup(label, each, tuple(members)))
+    return sorted(groups, key=_thesis_order)
+
+
+def _thesis_order(group: RunGroup) -> tuple:
+    """SAC first, then by positional and directional reward, rho, lambda, as the thesis."""
+    settings = group.settings
+    positional = none_if_none(settings.get("reward.positional")) or ""
+    directional = none_if_none(settings.get("reward.directional")) or ""
+    vlm = uses_vlm(settings)
+    return (vlm, positional != "furl", positional, directional,
+            settings.get("reward.rho", 0) if vlm else 0,
+            settings.get("reward.lambda_", 0) if directional else 0, group.label)
+
+
+def uses_vlm(settings: Mapping[str, Any]) -> bool:
+    """Whether the configuration has a VLM reward (positional or directional)."""
+    return (none_if_none(settings.get("reward.positional")) is not None
+            or none_if_none(settings.get("reward.directional")) is not None)
