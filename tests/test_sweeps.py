@@ -5,14 +5,12 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+import utils
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from test_recipe import QUICK, RECIPES
-
-import utils
 
 STUDIES = {  # study: (presets, protocol, runs)
     "table_5_2": ("furl,p2,p3,d3", "stage1", 96),
@@ -105,10 +103,11 @@ def test_two_job_joblib_sweep_runs_resumes_and_reports(tmp_path):
     for run in runs:
         rows = (run / "episodes.csv").read_text().splitlines()
         assert [row.split(",")[0] for row in rows[1:]] == ["1", "2", "3"]
-    report = RECIPES / "report.py"
-    if report.exists():  # the report recipe turns the sweep into tables
-        out = tmp_path / "report"
-        made = subprocess.run([sys.executable, str(report), str(sweep), "--out", str(out)],
-                              capture_output=True, text=True, timeout=300)
-        assert made.returncode == 0, made.stderr[-3000:]
-        assert any(Path(out).glob("*.md"))
+    # sweep -> report: both seeds grouped into one configuration, censored TTFS (3 episodes).
+    out = tmp_path / "report"
+    made = subprocess.run([sys.executable, str(RECIPES / "report.py"), str(sweep), "--out",
+                           str(out)], capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0, made.stderr[-3000:]
+    ttfs = (out / "ttfs.md").read_text()
+    assert "drawer-open" in ttfs and ("2 censored" in ttfs or "(n=2)" in ttfs), ttfs
+    assert (out / "success_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
