@@ -49,7 +49,7 @@ from temporal_torchrl.metrics import (  # noqa: E402
     tt50s,
     ttfs,
 )
-from temporal_torchrl.objectives import DirectionalLoss, PositionalRankingLoss  # noqa: E402
+from temporal_torchrl.objectives import finetuning_losses  # noqa: E402
 
 # What an episode keeps from each step (pixels never reach the buffer).
 STEP_KEYS = ("observation", "embedding", "action", "success", ("next", "observation"),
@@ -96,12 +96,11 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     if finetune:
         goal_image = (state["goal_image"] if state is not None else
                       goal_image_embedding((preloaded or experts)[0], encoder))
-        if reward.positional_heads is not None:
-            losses.append(PositionalRankingLoss(reward, goal_image, delta=cfg.reward.delta,
-                                                l2_margin=cfg.reward.l2_margin))
-        if reward.directional_heads is not None:
-            losses.append(DirectionalLoss(reward, goal_image,
-                                          same_position=cfg.reward.same_position))
+        # Each part's registered objective: ranking (FuRL), directional (thesis 4.3.3) or
+        # certainty (d_certainty).
+        losses = finetuning_losses(reward, goal_image, delta=cfg.reward.delta,
+                                   l2_margin=cfg.reward.l2_margin,
+                                   same_position=cfg.reward.same_position)
         head_optimizers = [utils.make_adam(loss.parameters(), cfg.reward.lr) for loss in losses]
 
     # ---- SAC
@@ -112,7 +111,8 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                    else state["expert_rows"])
     capacity = utils.replay_capacity(cfg, expert_rows,
                                      saved=state["buffer_capacity"] if state else None)
-    buffer = utils.make_replay_buffer(cfg, capacity)
+    buffer = utils.make_replay_buffer(cfg, capacity,
+                                      reward.window_length if reward is not None else None)
 
     # ---- fresh start or resume
     episode, env_steps, inserted, updates, successes = 0, 0, 0, 0, []

@@ -84,6 +84,9 @@ _NUMERIC_CHECKS = (
     ("reward.batch_size", *_integer(1), False),
     ("reward.lr", *_number(lambda v: v > 0, "a number > 0"), False),
     ("reward.label_window", *_integer(1), True),
+    ("reward.window", *_integer(2), False),
+    ("reward.certainty_bandwidth", *_number(lambda v: v > 0, "a number > 0"), False),
+    ("reward.certainty_prior", *_number(lambda v: v > 0, "a number > 0"), False),
     ("sac.batch_size", *_integer(1), False),
     ("sac.lr", *_number(lambda v: v > 0, "a number > 0"), False),
     ("sac.gamma", *_number(lambda v: 0 < v <= 1, "a number in (0, 1]"), False),
@@ -200,6 +203,11 @@ def validate_config(cfg: DictConfig) -> None:
         raise bad("reward.baseline", "tailored",
                   f"generic or a text: {cfg.env.task} has no tailored baseline (only the thesis's "
                   "six evaluation tasks have one)")
+    if not isinstance(cfg.reward.certainty_scaling, bool):
+        raise bad("reward.certainty_scaling", cfg.reward.certainty_scaling, "true or false")
+    if cfg.reward.certainty_scaling and directional is None:
+        raise bad("reward.certainty_scaling", True, "false without a directional reward (it "
+                  "scales r_D), or a reward.directional such as d3")
 
 
 def uses_vlm_reward(cfg: DictConfig) -> bool:
@@ -219,12 +227,14 @@ def baseline_text(cfg: DictConfig) -> str:
 def default_run_dir(cfg: DictConfig) -> Path:
     """``runs/<task>/<encoder>_<positional>+<directional>_rho<r>_lambda<l>_<baseline>_<protocol>
     /seed<s>``: runs that differ in anything a preset or protocol sets (encoder, reward, rho,
-    lambda, baseline, preloaded experts) or in the seed never share a directory."""
+    lambda, baseline, preloaded experts) or in the seed never share a directory (with
+    ``reward.certainty_scaling`` the directional part reads ``<directional>xcertainty``)."""
     if uses_vlm_reward(cfg):
         baseline = cfg.reward.baseline
         if baseline not in ("generic", "tailored"):
             baseline = re.sub(r"[^A-Za-z0-9]+", "-", baseline).strip("-")[:40] or "text"
-        method = (f"{cfg.encoder.name}_{cfg.reward.positional}+{cfg.reward.directional}"
+        scaled = "xcertainty" if cfg.reward.certainty_scaling else ""
+        method = (f"{cfg.encoder.name}_{cfg.reward.positional}+{cfg.reward.directional}{scaled}"
                   f"_rho{cfg.reward.rho:g}_lambda{cfg.reward.lambda_:g}_{baseline}")
     else:
         method = "sac"
@@ -373,12 +383,16 @@ def make_temporal_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
         encoder.dim, texts[0].cpu(), texts[1].cpu(), positional=_none(cfg.reward.positional),
         directional=_none(cfg.reward.directional), rho=cfg.reward.rho,
         lambda_=cfg.reward.lambda_, k=cfg.reward.k, alpha=cfg.reward.alpha,
-        projection=cfg.reward.projection)
+        projection=cfg.reward.projection, window_length=cfg.reward.window,
+        certainty_bandwidth=cfg.reward.certainty_bandwidth,
+        certainty_prior=cfg.reward.certainty_prior,
+        certainty_scaling=cfg.reward.certainty_scaling)
 
 
 def make_environment(cfg: DictConfig, encoder: Encoder | None,
                      reward: TemporalReward | None) -> EnvBase:
-    """Metaworld env -> (render) -> embedding -> history -> temporal reward."""
+    """Metaworld env -> (render) -> embedding -> history (with the window a d_sequence reward
+    reads) -> temporal reward."""
     render = encoder is not None and encoder.input_key == "pixels"
     env = make_env(cfg.env.task, cfg.env.seed, render=render, image_size=cfg.env.image_size,
                    camera=cfg.env.camera, fast_render=cfg.env.fast_render,
@@ -388,7 +402,8 @@ def make_environment(cfg: DictConfig, encoder: Encoder | None,
     if not isinstance(env, TransformedEnv):
         env = TransformedEnv(env)
     env.append_transform(EmbeddingTransform(encoder))
-    env.append_transform(EmbeddingHistoryTransform(k=cfg.reward.k))
+    env.append_transform(EmbeddingHistoryTransform(k=cfg.reward.k,
+                                                   window_length=reward.window_length))
     env.append_transform(TemporalRewardTransform(reward))
     return env
 
@@ -411,11 +426,14 @@ def replay_capacity(cfg: DictConfig, expert_rows: int = 0, saved: int | None = N
     return max(capacity, saved or 0)
 
 
-def make_replay_buffer(cfg: DictConfig, capacity: int) -> EpisodeReplayBuffer:
+def make_replay_buffer(cfg: DictConfig, capacity: int,
+                       window_length: int | None = None) -> EpisodeReplayBuffer:
+    """The run's buffer; ``window_length``: the reward's (``reward.window_length``), so batches
+    carry the window a d_sequence reward reads."""
     return EpisodeReplayBuffer(
         capacity, history=cfg.reward.k,
         embedding_dtype=getattr(torch, cfg.replay_buffer.embedding_dtype),
-        label_window=cfg.reward.label_window)
+        label_window=cfg.reward.label_window, window_length=window_length)
 
 
 def collect_successful_experts(cfg: DictConfig, encoder: Encoder | None, count: int,

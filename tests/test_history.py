@@ -7,22 +7,66 @@ from tensordict import TensorDict
 from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
-from temporal_torchrl.transforms import EmbeddingHistoryTransform
+from temporal_torchrl.transforms import EmbeddingHistoryTransform, episode_windows
 
 ELEMENT, EPISODE, STEP = 0, 1, 2  # channels of the mock embedding
 
 
-def _history_env(k, episode_lengths, dim=6):
-    return TransformedEnv(EmbeddingMockEnv(dim, episode_lengths), EmbeddingHistoryTransform(k))
+def _history_env(k, episode_lengths, dim=6, window_length=None):
+    return TransformedEnv(EmbeddingMockEnv(dim, episode_lengths),
+                          EmbeddingHistoryTransform(k, window_length=window_length))
 
 
 @pytest.mark.parametrize("episode_lengths", [(7,), (3, 5, 8)])
-def test_specs_check(episode_lengths):
-    env = _history_env(2, episode_lengths)
+@pytest.mark.parametrize("window_length", [None, 4])
+def test_specs_check(episode_lengths, window_length):
+    env = _history_env(2, episode_lengths, window_length=window_length)
     check_env_specs(env)
     spec = env.observation_spec
     assert spec["previous_embedding"].shape == spec["embedding"].shape
     assert spec["initial_embedding"].dtype == torch.float32
+    assert ("embedding_window" in spec.keys()) == (window_length is not None)
+    if window_length:
+        assert spec["embedding_window"].shape == (*spec["embedding"].shape[:-1], 4, 6)
+
+
+@pytest.mark.parametrize(("k", "window_length"), [(2, 4), (6, 3), (1, 9)])
+def test_window_across_episodes_never_crosses_a_start(k, window_length):
+    """s_(t-K+1) .. s_t, padded with the episode's s_0 at its start (episodes of 4 steps: the
+    window reaches past the start at every step when K = 9), next to the same s_(t-k) as
+    without a window, whichever of k and K - 1 is larger."""
+    env = _history_env(k, (4,), window_length=window_length)
+    rollout = env.rollout(13, break_when_any_done=False)
+    nxt = rollout["next"]
+    for i in range(len(rollout)):
+        t, episode = int(nxt["embedding"][i, STEP]), int(nxt["embedding"][i, EPISODE])
+        expected = torch.stack([mock_embedding(0, episode, max(t - j, 0), 6)
+                                for j in range(window_length - 1, -1, -1)])
+        torch.testing.assert_close(nxt["embedding_window"][i], expected)
+        torch.testing.assert_close(nxt["previous_embedding"][i],
+                                   mock_embedding(0, episode, max(t - k, 0), 6))
+    # At the reset frame the window is s_0 repeated; one episode's window is episode_windows.
+    starts = rollout["embedding"][:, STEP] == 0
+    torch.testing.assert_close(rollout["embedding_window"][starts],
+                               rollout["embedding"][starts].unsqueeze(1).expand(-1,
+                                                                               window_length, -1))
+    first = torch.cat([rollout["embedding"][:1], nxt["embedding"][:4]])
+    torch.testing.assert_close(episode_windows(first, window_length),
+                               torch.cat([rollout["embedding_window"][:1],
+                                          nxt["embedding_window"][:4]]))
+
+
+def test_batched_windows_restart_only_the_reset_elements():
+    env = _history_env(1, (3, 5, 8), window_length=3)
+    nxt = env.rollout(17, break_when_any_done=False)["next"]
+    for element in range(3):
+        for i in range(17):
+            episode = int(nxt["embedding"][element, i, EPISODE])
+            t = int(nxt["embedding"][element, i, STEP])
+            window = nxt["embedding_window"][element, i]
+            assert window[:, ELEMENT].tolist() == [element] * 3
+            assert window[:, EPISODE].tolist() == [episode] * 3
+            assert window[:, STEP].tolist() == [max(t - 2, 0), max(t - 1, 0), t]
 
 
 @pytest.mark.parametrize("k", [1, 3, 10])
@@ -62,17 +106,22 @@ def test_batched_env_partial_resets_restart_only_the_reset_elements():
 
 
 def test_outputs_do_not_alias_the_ring():
-    history = EmbeddingHistoryTransform(k=1)
+    history = EmbeddingHistoryTransform(k=1, window_length=2)
     first = history._reset(TensorDict(), TensorDict({"embedding": torch.zeros(2)}))
     history._step(TensorDict(), TensorDict({"embedding": torch.ones(2)}))
     history._step(TensorDict(), TensorDict({"embedding": torch.full((2,), 2.0)}))
     assert first["previous_embedding"].tolist() == [0.0, 0.0]
     assert first["initial_embedding"].tolist() == [0.0, 0.0]
+    assert first["embedding_window"].tolist() == [[0.0, 0.0], [0.0, 0.0]]
 
 
 def test_errors():
     with pytest.raises(ValueError, match="k=0"):
         EmbeddingHistoryTransform(k=0)
+    with pytest.raises(ValueError, match="window_length=1"):
+        EmbeddingHistoryTransform(window_length=1)
+    with pytest.raises(ValueError, match="window_length=1"):
+        episode_windows(torch.zeros(3, 2), 1)
     history = EmbeddingHistoryTransform()
     with pytest.raises(RuntimeError, match="reset"):
         history._step(TensorDict(), TensorDict({"embedding": torch.zeros(3)}))

@@ -1,11 +1,17 @@
 """Reward-finetuning losses against hand computations, and the stage switch."""
 
+import numpy as np
 import pytest
 import torch
 from tensordict import TensorDict
 
 from temporal_torchrl.data import EpisodeReplayBuffer
-from temporal_torchrl.objectives import DirectionalLoss, PositionalRankingLoss
+from temporal_torchrl.objectives import (
+    CertaintyLoss,
+    DirectionalLoss,
+    PositionalRankingLoss,
+    finetuning_losses,
+)
 from temporal_torchrl.rewards import DIRECTIONAL, TemporalReward
 
 D = 2
@@ -178,3 +184,146 @@ def test_losses_need_heads():
         PositionalRankingLoss(reward, torch.zeros(4))
     with pytest.raises(ValueError, match="directional"):
         DirectionalLoss(reward, torch.zeros(4))
+
+
+# --- beyond the thesis: d_sequence (6.3) and d_certainty (6.4) ----------------------------------
+
+def window_states(generator, count, dim, window_length):
+    window = torch.randn(count, window_length, dim, generator=generator)
+    return TensorDict({"embedding": window[:, -1], "previous_embedding": window[:, -3],
+                       "initial_embedding": window[:, 0], "embedding_window": window}, [count])
+
+
+def test_directional_loss_of_a_window_reward_by_hand():
+    """d_sequence: observed windows against the straight window to s_g (stage 1) and the
+    reversed window (stage 2), all at the position s_t, written out."""
+    gen = torch.Generator().manual_seed(5)
+    dim, length = 6, 4
+    reward = TemporalReward(dim, torch.randn(dim, generator=gen), torch.randn(dim, generator=gen),
+                            positional=None, directional="d_sequence", window_length=length)
+    goal = torch.randn(dim, generator=gen)
+    loss = DirectionalLoss(reward, goal)
+    negative, positive = (window_states(gen, 5, dim, length) for _ in range(2))
+    common = {"g": reward.goal_embedding, "b": reward.baseline_embedding}
+    heads = reward.directional_heads
+
+    def r(window, position):
+        return DIRECTIONAL["d_sequence"](heads, window[:, -1], window=window, position=position,
+                                         **common)
+
+    n_window, n_t = negative["embedding_window"], negative["embedding"]
+    straight = torch.stack([n_t + j / (length - 1) * (goal - n_t) for j in range(length)], 1)
+    expected_negative = r(n_window, n_t).mean() - r(straight, n_t).mean()
+    p_window, p_t = positive["embedding_window"], positive["embedding"]
+    reversed_window = p_window[:, [3, 2, 1, 0]]
+    expected_positive = r(reversed_window, p_t).mean() - r(p_window, p_t).mean()
+    out = loss(TensorDict({"negative": negative, "positive": positive}, [5]))
+    assert out["loss_negative"].item() == pytest.approx(expected_negative.item(), abs=1e-6)
+    assert out["loss_positive"].item() == pytest.approx(expected_positive.item(), abs=1e-6)
+    assert out["loss_directional"].requires_grad
+    with pytest.raises(KeyError, match="window_length=4"):
+        loss(TensorDict({"negative": negative.exclude("embedding_window")}, [5]))
+
+
+def certainty_batch():
+    """Positives at e1 that moved along e2 (s_(t-k) = e1 - e2), negatives at e1 that moved along
+    e3; the goal image s_g = e1 + e2 lies along the positives' move."""
+    e1, e2, e3 = torch.eye(3)
+
+    def states(previous):
+        return TensorDict({"embedding": torch.stack([e1, e1]),
+                           "previous_embedding": torch.stack([previous, previous]),
+                           "initial_embedding": torch.zeros(2, 3)}, [2])
+
+    return states(e1 - e3), states(e1 - e2), e1 + e2
+
+
+def test_certainty_loss_by_hand():
+    """Targets by hand (beta 0.1, c 1; position scale EPS, direction scale 1, see
+    test_rewards.test_reference_scales_by_hand), each observed direction leaving itself out:
+    observed positive (1 - 2 q)/(2 + 2 q) with q = exp(-10), observed negative the opposite,
+    towards the goal (along e2, both positives count) (2 - 2 q)/(3 + 2 q), the positives'
+    opposite direction -e2 (2 exp(-20) - 2 q)/(1 + 2 exp(-20) + 2 q), about 0."""
+    negative, positive, goal = certainty_batch()
+    torch.manual_seed(6)
+    reward = TemporalReward(3, torch.randn(3), torch.randn(3), positional=None,
+                            directional="d_certainty")
+    loss = CertaintyLoss(reward, goal)
+    q, far = np.exp(-10.0), np.exp(-20.0)
+    t_positive, t_goal = (1 - 2 * q) / (2 + 2 * q), (2 - 2 * q) / (3 + 2 * q)
+    t_opposite = (2 * far - 2 * q) / (1 + 2 * far + 2 * q)
+    s_t = positive["embedding"]
+
+    def r(s, s_prev):
+        return reward.directional_reward(s, s_prev, position=s_t).detach()
+
+    expected_negative = ((r(s_t, negative["previous_embedding"]) + t_positive) ** 2).mean() + \
+        ((r(goal.expand_as(s_t), s_t) - t_goal) ** 2).mean()
+    expected_positive = ((r(s_t, positive["previous_embedding"]) - t_positive) ** 2).mean() + \
+        ((r(positive["previous_embedding"], s_t) - t_opposite) ** 2).mean()
+    stage1 = loss(TensorDict({"negative": negative}, [2]))
+    # Stage 1 has negatives only: the observed ones get (-1 + ...)/(1 + 1) from their twin.
+    assert stage1["target_negative"].item() == pytest.approx(-1 / 2, abs=1e-6)
+    out = loss(TensorDict({"negative": negative, "positive": positive}, [2]))
+    assert out["target_positive"].item() == pytest.approx(t_positive, abs=1e-6)
+    assert out["target_negative"].item() == pytest.approx(-t_positive, abs=1e-6)
+    assert out["loss_certainty_negative"].item() == pytest.approx(expected_negative.item(),
+                                                                  abs=1e-6)
+    assert out["loss_certainty_positive"].item() == pytest.approx(expected_positive.item(),
+                                                                  abs=1e-6)
+    assert out["loss_certainty"].item() == pytest.approx(
+        (expected_negative + expected_positive).item(), abs=1e-6)
+    assert int(out["stage"]) == 2 and int(stage1["stage"]) == 1
+
+
+def test_certainty_loss_trains_graded_rewards():
+    """The heads learn the targets: -0.5 for the negatives' move, about 0 for the opposite of
+    the positives' move, and for the positives' move, which is also the move towards the goal
+    (one input, targets 1/2 observed and 2/3 towards the goal), their mean 7/12: graded values,
+    not D3's saturated +-1."""
+    negative, positive, goal = certainty_batch()
+    torch.manual_seed(7)
+    reward = TemporalReward(3, torch.randn(3), torch.randn(3), positional=None,
+                            directional="d_certainty")
+    loss = CertaintyLoss(reward, goal)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=3e-3)
+    batch = TensorDict({"negative": negative, "positive": positive}, [2])
+    for _ in range(300):
+        optimizer.zero_grad()
+        loss(batch)["loss_certainty"].backward()
+        optimizer.step()
+    s_t = positive["embedding"][:1]
+    rewards = [reward.directional_reward(end, start, position=s_t).item() for end, start in (
+        (s_t, positive["previous_embedding"][:1]), (s_t, negative["previous_embedding"][:1]),
+        (goal.unsqueeze(0), s_t), (positive["previous_embedding"][:1], s_t))]
+    np.testing.assert_allclose(rewards, [7 / 12, -0.5, 7 / 12, 0.0], atol=0.02)
+
+
+def test_finetuning_losses_follow_the_registered_objective():
+    torch.manual_seed(8)
+    pairs = {("furl", "d3"): [PositionalRankingLoss, DirectionalLoss],
+             ("p2", "d_certainty"): [PositionalRankingLoss, CertaintyLoss],
+             (None, "d_sequence"): [DirectionalLoss], ("liv", None): []}
+    for (positional, directional), expected in pairs.items():
+        reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional=positional,
+                                directional=directional)
+        losses = finetuning_losses(reward, torch.randn(4), delta=0.2, same_position=False)
+        assert [type(loss) for loss in losses] == expected
+    assert losses == [] and finetuning_losses(
+        TemporalReward(4, torch.randn(4), torch.randn(4)), torch.randn(4))[0].delta == 0.1
+    windowed = TemporalReward(4, torch.randn(4), torch.randn(4), directional="d_sequence")
+    with pytest.raises(ValueError, match="reads a window"):
+        CertaintyLoss(windowed, torch.randn(4))
+
+
+def test_directional_losses_refresh_the_certainty_references():
+    """certainty_scaling: each update's labelled states (s_t, s_t - s_(t-k), +-1) become the
+    references the reward scores with."""
+    negative, positive, goal = certainty_batch()
+    reward = TemporalReward(3, torch.randn(3), torch.randn(3), positional=None, directional="d3",
+                            certainty_scaling=True)
+    DirectionalLoss(reward, goal)(TensorDict({"negative": negative, "positive": positive}, [2]))
+    memory = reward.certainty
+    assert memory.labels.tolist() == [-1.0, -1.0, 1.0, 1.0]
+    torch.testing.assert_close(memory.directions, torch.eye(3)[[2, 2, 1, 1]])
+    torch.testing.assert_close(memory.scales, torch.tensor([1e-8, 1.0]))

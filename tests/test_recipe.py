@@ -47,7 +47,8 @@ def episode_rows(run_dir: Path) -> list[dict]:
 
 VARIANTS = [("none", "none"), ("liv", "none"), ("furl", "none"), ("p1", "none"),
             ("p2", "none"), ("p3", "none"), ("p4", "none"), ("furl", "d1"), ("furl", "d2"),
-            ("furl", "d3"), ("furl", "d4"), ("furl", "d5")]
+            ("furl", "d3"), ("furl", "d4"), ("furl", "d5"), ("furl", "d_certainty"),
+            ("furl", "d_sequence")]
 
 
 @pytest.mark.parametrize(("positional", "directional"), VARIANTS)
@@ -136,6 +137,42 @@ def test_a_reward_from_reward_modules_trains_and_resumes(tmp_path):
         sac_temporal.train(config(tmp_path, "reward.positional=user_p6"))
     with pytest.raises(FileNotFoundError, match="reward.modules"):
         sac_temporal.train(config(tmp_path, f"reward.modules=[{tmp_path / 'missing.py'}]"))
+
+
+@pytest.mark.parametrize("overrides", [
+    ("reward.directional=d_certainty",),
+    ("reward.directional=d_sequence", "reward.window=4"),
+    ("reward.directional=d3", "reward.certainty_scaling=true"),
+], ids=["d_certainty", "d_sequence", "d3_certainty_scaling"])
+def test_beyond_thesis_rewards_train_and_resume_exactly(tmp_path, overrides):
+    """d_certainty (its certainty loss), d_sequence (windows in the env and the buffer) and the
+    certainty scaling train in stage 2, and a run stopped after an episode and resumed ends
+    where the uninterrupted run does: heads, certainty references, optimizers, episodes."""
+    common = [*overrides, "protocol=stage2", "train.preload_positives=1", "train.episodes=3"]
+    straight = sac_temporal.train(config(tmp_path / "a", *common, "logger.backend=csv",
+                                         "logger.log_every=10"))
+    sac_temporal.train(config(tmp_path / "b", *common, "train.stop_after_episodes=2"))
+    resumed = sac_temporal.train(config(tmp_path / "b", "resume=true"))
+    assert resumed["successes"] == straight["successes"]
+    first, second = (utils.load_checkpoint(tmp_path / name / "run") for name in ("a", "b"))
+    assert first["reward"].keys() == second["reward"].keys()
+    for key, value in first["reward"].items():
+        torch.testing.assert_close(second["reward"][key], value, msg=key)
+    for saved, loaded in zip(first["head_optimizers"], second["head_optimizers"], strict=True):
+        for index, moments in saved["state"].items():
+            torch.testing.assert_close(loaded["state"][index]["exp_avg"], moments["exp_avg"])
+    assert episode_rows(tmp_path / "a" / "run") == episode_rows(tmp_path / "b" / "run")
+    metrics = straight["last_metrics"]
+    if "reward.directional=d_certainty" in overrides:
+        # Its certainty loss ran, with targets of both signs (the experts are the positives).
+        assert metrics["reward/loss_certainty"] > 0
+        assert metrics["reward/target_positive"] > 0 > metrics["reward/target_negative"]
+        assert "reward/loss_directional" not in metrics
+    elif "reward.certainty_scaling=true" in overrides:
+        assert first["reward"]["certainty.labels"].abs().sum() == 2 * 16  # a batch of each
+        assert "xcertainty" in str(utils.default_run_dir(config(tmp_path, *overrides)))
+    else:
+        assert first["reward"]["directional_heads.image.position_embedding"].shape == (3, 64)
 
 
 def test_training_metrics_are_logged_and_summarised(tmp_path):
@@ -375,6 +412,10 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
 @pytest.mark.parametrize(("override", "key"), [
     ("env.task=not-a-task", "env.task"), ("encoder.name=clip9", "encoder.name"),
     ("reward.positional=p9", "reward.positional"), ("reward.directional=d7", "reward.directional"),
+    ("reward.window=1", "reward.window"), ("reward.certainty_prior=0", "reward.certainty_prior"),
+    ("reward.certainty_bandwidth=-1", "reward.certainty_bandwidth"),
+    ("reward.certainty_scaling=yes", "reward.certainty_scaling"),
+    ("reward.directional=none reward.certainty_scaling=true", "it scales r_D"),
     ("reward.rho=-0.1", "reward.rho"), ("reward.lambda_=-1", "reward.lambda_"),
     ("reward.k=0", "reward.k"), ("train.episodes=0", "train.episodes"),
     ("logger.backend=tensorboard", "logger.backend"),

@@ -11,6 +11,7 @@ from temporal_torchrl.data import (
     episode_labels,
     goal_image_embedding,
 )
+from temporal_torchrl.transforms import episode_windows
 
 D = 4
 
@@ -68,6 +69,37 @@ def test_every_transition_with_histories_never_crossing_episodes():
     assert (sampled["step"] == 0).any()
     assert sampled["next", "embedding"].dtype == torch.float32
     assert buffer._column("embedding").dtype == torch.float16
+
+
+def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
+    """The window s_(t-K+1) .. s_t of every state (finetuning) and s_(t+2-K) .. s_(t+1) of every
+    transition (relabelling), with a ring that wrapped: episode 2 went to rows 0..9 (episode 0
+    overwritten), episode 1 sits at rows 12..22 after stale rows of episode 0, so a window
+    reaching past a start would read another episode's marker (or the storage's last row)."""
+    length = 4
+    buffer = EpisodeReplayBuffer(capacity=24, history=2, window_length=length)
+    for episode, steps in enumerate((11, 10, 9)):  # the third wraps to row 0
+        buffer.extend(make_episode(episode, steps))
+    assert buffer.num_episodes == 2
+    batch = buffer.transitions_at(buffer._transitions)
+    check_histories(buffer, batch)
+    expected = (100.0 * batch["episode"].unsqueeze(-1) + torch.clamp(
+        batch["step"].unsqueeze(-1) + 1 - torch.arange(length - 1, -1, -1), min=0))
+    assert torch.equal(marker(batch["next", "embedding_window"]), expected)
+    states = buffer.states_at(torch.arange(10))  # episode 2: s_0 .. s_9
+    assert marker(states["embedding_window"]).tolist()[:4] == [
+        [200.0] * 4, [200.0, 200.0, 200.0, 201.0], [200.0, 200.0, 201.0, 202.0],
+        [200.0, 201.0, 202.0, 203.0]]
+    assert torch.equal(states["embedding_window"], episode_windows(states["embedding"], length))
+    finetuning = buffer.sample_finetuning(64)
+    negatives = finetuning["negative"]
+    assert torch.equal(marker(negatives["embedding_window"][:, -1]), marker(
+        negatives["embedding"]))
+    plain = EpisodeReplayBuffer(capacity=24, history=2)
+    plain.extend(make_episode(0, 5))
+    assert "embedding_window" not in plain.sample(4)["next"].keys()
+    with pytest.raises(ValueError, match="window_length=1"):
+        EpisodeReplayBuffer(capacity=24, window_length=1)
 
 
 def test_overwrite_invalidates_whole_old_episodes():

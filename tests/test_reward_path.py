@@ -10,7 +10,7 @@ from test_recipe import config
 
 from temporal_torchrl.data import EpisodeReplayBuffer
 from temporal_torchrl.objectives import PositionalRankingLoss
-from temporal_torchrl.rewards import POSITIONAL, register_reward, unregister_reward
+from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, register_reward, unregister_reward
 
 
 def furl_plus_d3(reward, next_states: TensorDict) -> torch.Tensor:
@@ -109,6 +109,44 @@ def test_a_registered_reward_sees_the_same_history_everywhere(tmp_path):
     finally:
         unregister_reward("recording_p")
     assert all(seen.values()), {site: len(states) for site, states in seen.items()}
+    for site in ("relabel", "finetune"):
+        common = seen["env"].keys() & seen[site].keys()
+        assert len(common) > 10, site
+        for state in common:
+            assert seen[site][state] == seen["env"][state], site
+
+
+def test_a_window_reward_sees_the_same_window_everywhere(tmp_path):
+    """d_sequence's input: a window reward records the window s_(t-K+1) .. s_t it is given with
+    each observed state (the calls without a position): the env's history transform, the
+    relabelled batches and the finetuning batches agree, the window ends at s_t, and it is
+    padded with s_0 at each episode's start."""
+    seen = {"env": {}, "relabel": {}, "finetune": {}}
+
+    def recording(heads, s, *, window=None, g, b, position=None, **unused):
+        assert window is not None, "every call site must pass the window"
+        if position is None:
+            site = ("finetune" if torch.is_grad_enabled() else
+                    "env" if s.ndim == 1 else "relabel")
+            for state, states in zip(s.reshape(-1, s.shape[-1]),
+                                     window.reshape(-1, *window.shape[-2:]), strict=True):
+                assert torch.equal(states[-1], state)
+                seen[site].setdefault(tuple(state.tolist()), set()).add(
+                    tuple(map(tuple, states.tolist())))
+        return DIRECTIONAL["d_sequence"](heads, s, window=window, g=g, b=b, position=position)
+
+    register_reward("recording_d", recording, kind="directional", image_input="window")
+    try:
+        sac_temporal.train(config(tmp_path, "reward.positional=none",
+                                  "reward.directional=recording_d", "reward.window=6",
+                                  "replay_buffer.embedding_dtype=float32", "train.episodes=2"))
+    finally:
+        unregister_reward("recording_d")
+    assert all(seen.values()), {site: len(states) for site, states in seen.items()}
+    # Each episode's first rewarded state s_1 has the window (s_0, .., s_0, s_1).
+    padded = [window for windows in seen["env"].values() for window in windows
+              if len(set(window[:-1])) == 1]
+    assert len(padded) == 2, "one padded window per episode"
     for site in ("relabel", "finetune"):
         common = seen["env"].keys() & seen[site].keys()
         assert len(common) > 10, site

@@ -23,7 +23,8 @@ def _reward(**kwargs):
 
 def _env(reward, episode_lengths=(3, 5, 8)):
     return TransformedEnv(EmbeddingMockEnv(D, episode_lengths),
-                          Compose(EmbeddingHistoryTransform(reward.k),
+                          Compose(EmbeddingHistoryTransform(reward.k,
+                                                            window_length=reward.window_length),
                                   TemporalRewardTransform(reward)))
 
 
@@ -35,7 +36,8 @@ def test_specs_check(episode_lengths):
 
 
 @pytest.mark.parametrize(("positional", "directional"),
-                         [("furl", "d3"), ("p1", "d4"), ("p3", "d5"), (None, "d2"), ("liv", None)])
+                         [("furl", "d3"), ("p1", "d4"), ("p3", "d5"), (None, "d2"), ("liv", None),
+                          ("furl", "d_sequence"), (None, "d_certainty")])
 def test_env_reward_equals_relabelled_stored_batch(positional, directional):
     reward = _reward(positional=positional, directional=directional)
     rollout = _env(reward).rollout(12, break_when_any_done=False)
@@ -101,6 +103,14 @@ def test_missing_history_is_explained():
     flat = TensorDict({"embedding": s, "success": torch.ones(3, 1, dtype=torch.bool)}, [3])
     with pytest.raises(KeyError, match="initial_embedding.*EmbeddingHistoryTransform"):
         TemporalRewardTransform(_reward())(flat)
+
+
+def test_missing_window_is_explained():
+    s = torch.randn(3, D)
+    flat = TensorDict({"embedding": s, "initial_embedding": s, "previous_embedding": s,
+                       "success": torch.ones(3, 1, dtype=torch.bool)}, [3])
+    with pytest.raises(KeyError, match=r"embedding_window.*window_length=8\)"):
+        TemporalRewardTransform(_reward(directional="d_sequence"))(flat)
 
 
 def test_mismatching_embedding_size_in_the_env_is_explained():

@@ -7,22 +7,40 @@ import torch
 from temporal_torchrl.rewards import (
     DIRECTIONAL,
     IMAGE_INPUTS,
+    OBJECTIVES,
     POSITIONAL,
     RewardHeads,
     TemporalReward,
     cosine_similarity,
+    direction_certainty,
     heads_input_dims,
+    objective_of,
+    reference_scales,
     register_reward,
+    straight_window,
     unregister_reward,
+    window_tokens,
 )
 
 D, HIDDEN, OUT, BATCH, ALPHA = 5, 7, 3, 4, 0.4
+WINDOW = 4  # K of the window rewards (d_sequence) in these tests
 
 
 def make_heads(variant, seed=0):
     torch.manual_seed(seed)
     image_dim, text_dim = heads_input_dims(variant, D)
-    return RewardHeads(image_dim, text_dim, hidden_dim=HIDDEN, out_dim=OUT)
+    sequence_length = WINDOW - 1 if IMAGE_INPUTS[variant] == "window" else None
+    return RewardHeads(image_dim, text_dim, hidden_dim=HIDDEN, out_dim=OUT,
+                       sequence_length=sequence_length)
+
+
+def path(s, s_prev):
+    """A curved window of WINDOW embeddings from s_prev to s (steps in different directions)."""
+    fractions = torch.linspace(0, 1, WINDOW, dtype=s.dtype).unsqueeze(-1)
+    bend = torch.sin(torch.pi * fractions) * (s - s_prev).roll(1, dims=-1).unsqueeze(-2)
+    window = s_prev.unsqueeze(-2) + fractions * (s - s_prev).unsqueeze(-2) + bend
+    window[..., -1, :] = s  # exactly s_t at the newest slot
+    return window
 
 
 def mlp(head, x):
@@ -80,6 +98,16 @@ def reference(variant, heads, s, s0, s_prev, g, b, alpha, projection="origin", p
         return csim(fi(unit(s - s_prev)), fl(g - b))
     if variant == "d2":
         return csim(fi(s) - fi(s_prev), fl(g) - fl(b))
+    if variant == "d_sequence":
+        # x_j = n(s_t) ⊕ n(w_j - w_{j-1}) into the sequence encoder (run by torch; the
+        # equation around it is what is checked here).
+        window = path(torch.from_numpy(s), torch.from_numpy(s_prev)).numpy()
+        tokens = np.stack([np.concatenate([unit(p), unit(window[j] - window[j - 1])])
+                           for j in range(1, WINDOW)])
+        image = heads.image(torch.from_numpy(tokens).float()).detach().double().numpy()
+        return csim(image, fl(g - b))
+    if variant == "d_certainty":  # D3's equation; its heads are trained another way
+        variant = "d3"
     position_part = {"d3": p, "d4": p - s0,
                      "d5": regularise(p, g, b, alpha, projection)}[variant]
     return csim(fi(np.concatenate([unit(position_part), unit(s - s_prev)])), fl(g - b))
@@ -97,7 +125,8 @@ def embeddings():
 
 def _call(variant, heads, s, s0, s_prev, g, b, **kwargs):
     fn = {**POSITIONAL, **DIRECTIONAL}[variant]
-    return fn(heads, s, s0=s0, s_prev=s_prev, g=g, b=b, alpha=ALPHA, **kwargs)
+    window = None if s_prev is None else path(s, s_prev)
+    return fn(heads, s, s0=s0, s_prev=s_prev, g=g, b=b, alpha=ALPHA, window=window, **kwargs)
 
 
 ALL_VARIANTS = [*POSITIONAL, *DIRECTIONAL]
@@ -226,7 +255,7 @@ def test_gradients_reach_both_heads_and_shapes_follow_the_batch(variant):
     reward = _call(variant, heads, s, s0, s_prev, torch.randn(D), torch.randn(D))
     assert reward.shape == (2, 3)
     reward.sum().backward()
-    assert heads.image[0].weight.grad.abs().sum() > 0
+    assert next(heads.image.parameters()).grad.abs().sum() > 0
     assert heads.text[0].weight.grad.abs().sum() > 0
 
 
@@ -241,7 +270,7 @@ def test_missing_argument_is_named():
 def test_heads_input_dims():
     assert heads_input_dims("furl", 1024) == (1024, 1024)
     assert heads_input_dims("d1", 1024) == (1024, 1024)
-    for variant in ("d3", "d4", "d5"):
+    for variant in ("d3", "d4", "d5", "d_certainty", "d_sequence"):
         assert heads_input_dims(variant, 1024) == (2048, 1024)
     with pytest.raises(ValueError, match="zero-shot"):
         heads_input_dims("liv", 8)
@@ -427,5 +456,187 @@ def test_assigning_to_the_dict_directly_says_how_to_register(monkeypatch):
 def test_builtins_are_registered_with_their_layouts():
     assert [name for name, layout in IMAGE_INPUTS.items() if layout is None] == ["liv"]
     assert [name for name, layout in IMAGE_INPUTS.items() if layout == "concatenated"] == [
-        "d3", "d4", "d5"]
-    assert set(IMAGE_INPUTS) == {*POSITIONAL, *DIRECTIONAL}
+        "d3", "d4", "d5", "d_certainty"]
+    assert [name for name, layout in IMAGE_INPUTS.items() if layout == "window"] == [
+        "d_sequence"]
+    assert set(IMAGE_INPUTS) == set(OBJECTIVES) == {*POSITIONAL, *DIRECTIONAL}
+    assert {name for name, objective in OBJECTIVES.items() if objective == "ranking"} == \
+        set(POSITIONAL)
+    assert [name for name, objective in OBJECTIVES.items() if objective == "certainty"] == [
+        "d_certainty"]
+
+
+# --- beyond the thesis: d_sequence (6.3) and the certainty of d_certainty (6.4) ------------------
+
+def test_window_tokens_by_hand():
+    """x_j = n(p) ⊕ n(w_j - w_{j-1}): the window (0,0) -> (2,0) -> (2,0) -> (2,3) at its newest
+    position (2,3); the repeated entry (padding at an episode start) is a zero step."""
+    window = torch.tensor([[0.0, 0.0], [2.0, 0.0], [2.0, 0.0], [2.0, 3.0]])
+    p = [2 / 13 ** 0.5, 3 / 13 ** 0.5]
+    torch.testing.assert_close(window_tokens(window), torch.tensor([
+        [*p, 1.0, 0.0], [*p, 0.0, 0.0], [*p, 0.0, 1.0]]))
+    # Another position, one vector for a batch of windows.
+    tokens = window_tokens(torch.stack([window, -window]), position=torch.tensor([0.0, -4.0]))
+    assert tokens.shape == (2, 3, 4)
+    torch.testing.assert_close(tokens[1, 0], torch.tensor([0.0, -1.0, -1.0, 0.0]))
+    with pytest.raises(ValueError, match="K >= 2"):
+        window_tokens(torch.zeros(1, 3))
+
+
+def test_straight_window_by_hand():
+    start, end = torch.tensor([[1.0, 0.0]]), torch.tensor([4.0, 6.0])
+    torch.testing.assert_close(straight_window(start, end, 4), torch.tensor(
+        [[[1.0, 0.0], [2.0, 2.0], [3.0, 4.0], [4.0, 6.0]]]))
+    with pytest.raises(ValueError, match="length=1"):
+        straight_window(start, end, 1)
+
+
+def test_d_sequence_with_two_embeddings_reads_d3_inputs():
+    """K = 2: the one token of the observed, towards-goal and opposite windows the directional
+    loss builds is D3's image input with k = 1 for the same three directions."""
+    gen = torch.Generator().manual_seed(4)
+    s_t, s_prev, s_g = (3.0 * torch.randn(BATCH, D, generator=gen) for _ in range(3))
+    observed = torch.stack([s_prev, s_t], -2)
+
+    def d3_input(position, direction):
+        return torch.cat([position / position.norm(dim=-1, keepdim=True),
+                          direction / direction.norm(dim=-1, keepdim=True)], -1).unsqueeze(-2)
+
+    torch.testing.assert_close(window_tokens(observed), d3_input(s_t, s_t - s_prev))
+    torch.testing.assert_close(window_tokens(straight_window(s_t, s_g, 2), position=s_t),
+                               d3_input(s_t, s_g - s_t))
+    torch.testing.assert_close(window_tokens(observed.flip(-2), position=s_t),
+                               d3_input(s_t, s_prev - s_t))
+
+
+def test_d_sequence_reads_the_order_of_the_steps(embeddings):
+    s, s0, s_prev, _, g, b = embeddings
+    heads = make_heads("d_sequence")
+    window = path(s, s_prev)
+    shuffled = window[:, [0, 2, 1, 3]]  # the same steps' positions, another order
+    forward = DIRECTIONAL["d_sequence"](heads, s, window=window, g=g, b=b)
+    assert not torch.allclose(forward, DIRECTIONAL["d_sequence"](heads, s, window=shuffled,
+                                                                 g=g, b=b))
+    with pytest.raises(ValueError, match="needs window"):
+        DIRECTIONAL["d_sequence"](heads, s, s_prev=s_prev, g=g, b=b)
+    with pytest.raises(ValueError, match=r"expected \[\.\.\., 3, 10\]"):
+        DIRECTIONAL["d_sequence"](heads, s, window=path(s, s_prev)[:, 1:], g=g, b=b)
+
+
+def certainty_references():
+    """Two positives and two negatives at the position e1: the positives moved along e2, the
+    negatives along e3."""
+    e1, e2, e3 = torch.eye(3)
+    positions = torch.stack([e1, e1, e1, e1])
+    directions = torch.stack([e2, e2, e3, e3])
+    labels = torch.tensor([1.0, 1.0, -1.0, -1.0])
+    return positions, directions, labels
+
+
+def test_reference_scales_by_hand():
+    positions, directions, _ = certainty_references()
+    # Positions all equal: median distance 0, floored at EPS. Directions: of the 12 ordered
+    # distinct pairs, 4 are equal (distance 0) and 8 orthogonal (distance 1): median 1.
+    torch.testing.assert_close(reference_scales(positions, directions),
+                               torch.tensor([1e-8, 1.0]))
+    torch.testing.assert_close(reference_scales(positions[:1], directions[:1]), torch.ones(2))
+
+
+def test_certainty_is_positive_negative_or_unsure_by_hand():
+    """A direction seen only in positives gets a positive certainty, one seen only in negatives
+    a negative one, an unseen one (the opposite direction, or another position) about 0."""
+    positions, directions, labels = certainty_references()
+    e1, e2, e3 = torch.eye(3)
+    queries = torch.stack([e1, e1, e1, e2]), torch.stack([e2, e3, -e2, e2])
+
+    def certainty(bandwidth, **kwargs):
+        return direction_certainty(*queries, positions, directions, labels,
+                                   bandwidth=bandwidth, prior=1.0, **kwargs)
+
+    # Scales [EPS, 1] (above), beta = 0.1: kappa = 1 for the same position and direction,
+    # exp(-10) for an orthogonal direction, exp(-20) for the opposite one, ~0 elsewhere.
+    near, far = np.exp(-10.0), np.exp(-20.0)
+    expected = [(2 - 2 * near) / (3 + 2 * near), (2 * near - 2) / (3 + 2 * near),
+                (2 * far - 2 * near) / (1 + 2 * far + 2 * near), 0.0]
+    np.testing.assert_allclose(certainty(0.1).numpy(), expected, atol=1e-7)
+    assert certainty(0.1)[0] > 0.6 and certainty(0.1)[1] < -0.6
+    assert abs(certainty(0.1)[2]) < 1e-3 and abs(certainty(0.1)[3]) < 1e-3
+    # Explicit scales [1, 1] and beta = 1: the position kernel matters too (e2 vs e1: exp(-1)).
+    wide = certainty(1.0, scales=torch.ones(2)).numpy()
+    a, c = np.exp(-1.0), np.exp(-2.0)
+    np.testing.assert_allclose(wide, [(2 - 2 * a) / (3 + 2 * a), (2 * a - 2) / (3 + 2 * a),
+                                      (2 * c - 2 * a) / (1 + 2 * c + 2 * a),
+                                      (2 * a - 2 * c) / (1 + 2 * a + 2 * c)], rtol=1e-6)
+    # Leave-one-out: the first positive without itself has one positive neighbour left.
+    exclude = torch.zeros(4, 4, dtype=torch.bool)
+    exclude[0, 0] = True
+    assert certainty(0.1, exclude=exclude)[0].item() == pytest.approx(
+        (1 - 2 * near) / (2 + 2 * near))
+    # No references at all: unsure everywhere.
+    assert torch.equal(direction_certainty(*queries, positions[:0], directions[:0], labels[:0]),
+                       torch.zeros(4))
+    with pytest.raises(ValueError, match="prior=0"):
+        direction_certainty(*queries, positions, directions, labels, prior=0)
+
+
+def test_certainty_scaling_multiplies_the_directional_reward_by_the_certainty(embeddings):
+    """certainty_scaling: forward's r_D is |t(s_t, Δs_t)| r_D3, the losses' directional_reward
+    stays D3; the references are part of the state_dict (resume)."""
+    s, s0, s_prev, _, _, _ = embeddings
+    reward = _temporal(positional=None, directional="d3", certainty_scaling=True)
+    success = torch.zeros(BATCH, 1, dtype=torch.bool)
+    assert torch.equal(reward(s, s0, s_prev, success)["directional_reward"],
+                       torch.zeros(BATCH, 1))  # no references yet: unsure everywhere
+    # The first two states' moves were seen in positives, the last two in negatives.
+    references = (s, s - s_prev, torch.tensor([1.0, 1.0, -1.0, -1.0]))
+    reward.certainty.remember(*references)
+    r_d3 = reward.directional_reward(s, s_prev, s0)
+    t = direction_certainty(s, s - s_prev, *references, bandwidth=reward.certainty_bandwidth,
+                            prior=reward.certainty_prior)
+    assert (t[:2] > 0.4).all() and (t[2:] < -0.4).all()
+    torch.testing.assert_close(reward(s, s0, s_prev, success)["directional_reward"].squeeze(-1),
+                               r_d3 * t.abs())
+    resumed = _temporal(positional=None, directional="d3", certainty_scaling=True)
+    resumed.load_state_dict(reward.state_dict())
+    assert resumed.certainty.labels.numel() == 4
+    torch.testing.assert_close(resumed(s, s0, s_prev, success)["directional_reward"],
+                               reward(s, s0, s_prev, success)["directional_reward"])
+    with pytest.raises(ValueError, match="set directional too"):
+        _temporal(positional="furl", certainty_scaling=True)
+
+
+def test_window_reward_needs_its_window(embeddings):
+    s, s0, s_prev, _, _, _ = embeddings
+    reward = _temporal(positional="furl", directional="d_sequence", window_length=WINDOW)
+    assert reward.window_length == WINDOW
+    assert reward.directional_heads.image.length == WINDOW - 1
+    assert _temporal(directional="d3", window_length=WINDOW).window_length is None
+    success = torch.zeros(BATCH, 1, dtype=torch.bool)
+    window = path(s, s_prev)
+    out = reward(s, s0, s_prev, success, window=window)
+    torch.testing.assert_close(out["directional_reward"].squeeze(-1), DIRECTIONAL["d_sequence"](
+        reward.directional_heads, s, window=window, g=reward.goal_embedding,
+        b=reward.baseline_embedding))
+    with pytest.raises(ValueError, match="reads the window of the last 4 embeddings"):
+        reward(s, s0, s_prev, success)
+    with pytest.raises(ValueError, match=r"expected \[\.\.\., 4, 5\]"):
+        reward(s, s0, s_prev, success, window=window[:, 1:])
+    with pytest.raises(ValueError, match="window_length=1"):
+        _temporal(directional="d_sequence", window_length=1)
+
+
+def test_objectives_are_registered_and_checked(registry):
+    assert objective_of("d3") == "directional" and objective_of("d_certainty") == "certainty"
+    registry("d6", toy_directional, kind="directional", image_input="concatenated",
+             objective="certainty")
+    assert objective_of("d6") == "certainty"
+    with pytest.raises(ValueError, match="objective='certainty'; a positional reward is "
+                                         "trained with one of ranking"):
+        register_reward("p6", toy_positional, kind="positional", objective="certainty")
+    with pytest.raises(ValueError, match="objective='certainty' needs a reward of one direction"):
+        register_reward("d7", toy_directional, kind="directional", image_input="window",
+                        objective="certainty")
+    with pytest.raises(ValueError, match="image_input='window' is for directional rewards"):
+        register_reward("p6", toy_positional, kind="positional", image_input="window")
+    with pytest.raises(ValueError, match="Unknown reward variant 'd9'"):
+        objective_of("d9")

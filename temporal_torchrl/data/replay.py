@@ -10,6 +10,8 @@ stored once, and every history the rewards need is index arithmetic inside the e
 - ``s_0``       = row ``t - step_t`` (the episode's first row)
 - ``s_{t+1-k}`` = row ``t + 1 - min(t + 1, k)`` (clamped to ``s_0`` at the episode start, as the
   history transform does during collection)
+- the window ``s_{t+2-K} .. s_{t+1}`` (d_sequence, with ``window_length=K``) = rows
+  ``t + 1 - min(t + 1, K - 1 - j)``, ``j = 0 .. K - 1`` (padded with ``s_0`` likewise)
 
 Pixels are never stored; embeddings are kept in ``float16`` by default (1024-d: 2 KiB a state),
 which puts 500,000 transitions with D = 1024 at about 1.12 GB.
@@ -104,17 +106,25 @@ class EpisodeReplayBuffer:
         label_window: positives and negatives are sampled from the most recent
             ``label_window`` labelled states of each kind (FuRL's two FIFO buffers of 20,000
             embeddings); ``None`` uses all of them.
+        window_length: K (>= 2): batches also carry ``"embedding_window"``, the last K
+            embeddings of each state (``reward.window_length``; None: no window, the default).
     """
 
     def __init__(self, capacity: int, *, history: int = 5,
                  embedding_dtype: torch.dtype = torch.float16,
-                 label_window: int | None = 20_000) -> None:
+                 label_window: int | None = 20_000, window_length: int | None = None) -> None:
         if capacity < 2:
             raise ValueError(f"capacity={capacity} must be >= 2 rows (one episode of one step).")
         if history < 1:
             raise ValueError(f"history={history} must be >= 1 (k, the embedding offset).")
+        if window_length is not None and (isinstance(window_length, bool)
+                                          or not isinstance(window_length, int)
+                                          or window_length < 2):
+            raise ValueError(f"window_length={window_length!r}; expected None or an integer "
+                             ">= 2 (the K embeddings s_(t-K+1) .. s_t).")
         self.capacity = capacity
         self.history = history
+        self.window_length = window_length
         self.embedding_dtype = embedding_dtype
         self.label_window = label_window
         self._storage = LazyTensorStorage(capacity)
@@ -278,12 +288,19 @@ class EpisodeReplayBuffer:
     def _has(self, key: str) -> bool:
         return bool(self._episodes) and key in self._storage._storage.keys()
 
+    def _window(self, rows: torch.Tensor, step: torch.Tensor) -> torch.Tensor:
+        """The embeddings of rows ``rows - min(step, K - 1 - j)``, j = 0 .. K - 1: ``[B, K, D]``,
+        the window ending at each row, never before its episode's first row."""
+        offsets = torch.arange(self.window_length - 1, -1, -1)
+        return self._embedding(rows.unsqueeze(-1) - torch.minimum(offsets, step.unsqueeze(-1)))
+
     def transitions_at(self, rows: torch.Tensor) -> TensorDict:
         """SAC transitions starting at storage ``rows`` (each row a state ``t`` with ``t < T``).
 
         Keys: ``observation``, ``action``, ``step``, ``episode`` and under ``"next"``:
         ``observation``, ``embedding`` (s_{t+1}), ``initial_embedding`` (s_0),
-        ``previous_embedding`` (s_{t+1-k}, s_0 when ``t+1-k <= 0``), ``success``,
+        ``previous_embedding`` (s_{t+1-k}, s_0 when ``t+1-k <= 0``), with ``window_length``
+        ``embedding_window`` (s_{t+2-K} .. s_{t+1}, padded with s_0), ``success``,
         ``terminated``, ``truncated``, ``done`` and ``reward`` (the sparse task reward
         ``success_{t+1} - 1``, to be overwritten by the reward transform).
         """
@@ -304,6 +321,8 @@ class EpisodeReplayBuffer:
             nxt["initial_embedding"] = self._embedding(rows - step)
             nxt["previous_embedding"] = self._embedding(
                 following - torch.clamp(step + 1, max=self.history))
+            if self.window_length:
+                nxt["embedding_window"] = self._window(following, step + 1)
         batch["next"] = nxt
         return TensorDict(batch, [rows.shape[0]])
 
@@ -311,10 +330,11 @@ class EpisodeReplayBuffer:
         """Embedding states at storage ``rows`` with their history, label, step and episode.
 
         Keys: ``embedding`` (s_t), ``initial_embedding`` (s_0), ``previous_embedding``
-        (s_{t-k}, clamped to s_0), ``label``, ``step``, ``episode``.
+        (s_{t-k}, clamped to s_0), with ``window_length`` ``embedding_window``
+        (s_{t-K+1} .. s_t, padded with s_0), ``label``, ``step``, ``episode``.
         """
         step = self._column("step")[rows].long()
-        return TensorDict({
+        states = TensorDict({
             "embedding": self._embedding(rows),
             "initial_embedding": self._embedding(rows - step),
             "previous_embedding": self._embedding(rows - torch.clamp(step, max=self.history)),
@@ -322,6 +342,9 @@ class EpisodeReplayBuffer:
             "step": step,
             "episode": self._column("episode")[rows],
         }, [rows.shape[0]])
+        if self.window_length:
+            states["embedding_window"] = self._window(rows, step)
+        return states
 
     @staticmethod
     def _draw(candidates: torch.Tensor, batch_size: int, what: str) -> torch.Tensor:

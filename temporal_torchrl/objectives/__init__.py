@@ -2,9 +2,20 @@
 
 from temporal_torchrl.objectives.finetuning import (
     HEADS_LEARNING_RATE,
+    CertaintyLoss,
     DirectionalLoss,
     PositionalRankingLoss,
+    finetuning_losses,
     ranking_loss,
+    remember_certainty_references,
 )
 
-__all__ = ["HEADS_LEARNING_RATE", "DirectionalLoss", "PositionalRankingLoss", "ranking_loss"]
+__all__ = [
+    "HEADS_LEARNING_RATE",
+    "CertaintyLoss",
+    "DirectionalLoss",
+    "PositionalRankingLoss",
+    "finetuning_losses",
+    "ranking_loss",
+    "remember_certainty_references",
+]

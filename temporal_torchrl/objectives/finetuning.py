@@ -1,10 +1,11 @@
 """Reward-finetuning losses for the positional (FuRL) and directional reward heads.
 
-Both are TorchRL :class:`~torchrl.objectives.LossModule` s that read one batch from
+All are TorchRL :class:`~torchrl.objectives.LossModule` s that read one batch from
 :meth:`temporal_torchrl.data.EpisodeReplayBuffer.sample_finetuning`:
 
 - ``"negative"``: states of failed episodes (``embedding`` s_t, ``initial_embedding`` s_0,
-  ``previous_embedding`` s_{t-k});
+  ``previous_embedding`` s_{t-k}, and ``embedding_window`` s_{t-K+1} .. s_t for a reward that
+  reads a window);
 - ``"positive"`` (stage 2 only): positive states of successful episodes;
 - ``"positive_pair"`` (stage 2, when a positive run is longer than the gap): ``"later"`` s_i and
   ``"earlier"`` s_{i-gap} from one positive episode.
@@ -12,6 +13,9 @@ Both are TorchRL :class:`~torchrl.objectives.LossModule` s that read one batch f
 The stage is read from the batch: stage 2 (thesis 3.1.3.2, 4.3.3.2) starts as soon as the buffer
 holds a positive episode, which is when the batch starts to carry ``"positive"``. Each loss owns
 only its heads, so ``torch.optim.Adam(loss.parameters(), lr=1e-4)`` is its optimizer.
+:func:`finetuning_losses` builds the losses a reward's registered objectives ask for:
+:class:`PositionalRankingLoss` (thesis 3.1.3), :class:`DirectionalLoss` (thesis 4.3.3) and, beyond
+the thesis (section 6.4 proposal), :class:`CertaintyLoss`.
 
 The rewards are computed by the :class:`~temporal_torchrl.rewards.TemporalReward` itself
 (:meth:`~temporal_torchrl.rewards.TemporalReward.positional_reward`,
@@ -27,7 +31,14 @@ from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 from torchrl.objectives import LossModule
 
-from temporal_torchrl.rewards import DIRECTIONAL, TemporalReward
+from temporal_torchrl.rewards import (
+    DIRECTIONAL,
+    TemporalReward,
+    direction_certainty,
+    objective_of,
+    reference_scales,
+    straight_window,
+)
 
 #: The release's optimizer settings for the heads (prior-implementations.md).
 HEADS_LEARNING_RATE = 1e-4
@@ -131,6 +142,16 @@ class DirectionalLoss(LossModule):
     opposite direction Δ̄s_t = s_{t-k} - s_t. The buffer never labels an episode's reset frame s_0
     (as in the reference implementations), so every observed direction is that of a real step.
 
+    A reward that reads a window (d_sequence; beyond the thesis, section 6.3 proposal) gets the
+    same terms with paths in place of directions, all at the position s_t: the observed window
+    W_t = (s_{t-K+1} .. s_t); towards the goal the straight window from s_t to s_g
+    (:func:`~temporal_torchrl.rewards.straight_window`: every step along s_g - s_t); opposite,
+    W_t reversed (s_t .. s_{t-K+1}: every step negated, in reverse order). With K = 2 these are
+    D3's three directions with k = 1.
+
+    With ``reward.certainty_scaling`` the loss also refreshes the reward's certainty references
+    (:class:`~temporal_torchrl.rewards.CertaintyMemory`) from the batch.
+
     Args:
         reward: the :class:`TemporalReward` whose directional heads are trained.
         goal_image_embedding: s_g ``[D]``.
@@ -138,7 +159,7 @@ class DirectionalLoss(LossModule):
             use the variant's own position part at s_t, like the observed term. ``False``
             reproduces the thesis's release, where D4 and D5 score those two terms with the
             plain position n(s_t) (D3's input) while the observed term keeps D4's n(s_t - s_0)
-            or D5's goal-baseline position. D1-D3 are the same either way.
+            or D5's goal-baseline position. Other variants are the same either way.
     """
 
     #: The key of the loss to minimise in the output.
@@ -158,39 +179,195 @@ class DirectionalLoss(LossModule):
 
     def directional_reward(self, direction_end: Tensor, direction_start: Tensor,
                            states: TensorDictBase, position: Tensor | None = None,
-                           variant: str | None = None) -> Tensor:
-        """r_D of the direction ``direction_end - direction_start`` at ``position``."""
+                           variant: str | None = None, window: Tensor | None = None) -> Tensor:
+        """r_D of the direction ``direction_end - direction_start`` at ``position`` (or of the
+        path ``window``, for a reward that reads one)."""
         return self.reward.directional_reward(direction_end, direction_start,
                                               states["initial_embedding"], position=position,
-                                              variant=variant)
+                                              variant=variant, window=window)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         """Losses for one batch: ``loss_directional`` (to minimise), the parts, and ``stage``."""
+        remember_certainty_references(self.reward, tensordict)
         # The release scores the contrasted direction at the plain position n(s_t): D3's input.
         variant = self.reward.directional
-        contrast_variant = (None if self.same_position or variant in ("d1", "d2") else "d3")
+        contrast_variant = "d3" if not self.same_position and variant in ("d4", "d5") else None
+        length = self.reward.window_length
         parts = {}
         stage = 2 if "positive" in tensordict.keys() else 1
         negative = tensordict.get("negative", None)
         if negative is not None:
             s_t, s_tk = negative["embedding"], negative["previous_embedding"]
-            observed = self.directional_reward(s_t, s_tk, negative)
+            s_g = self.goal_image_embedding.expand_as(s_t)
+            window = _window(negative, length)
+            observed = self.directional_reward(s_t, s_tk, negative, window=window)
             towards_goal = self.directional_reward(
-                self.goal_image_embedding.expand_as(s_t), s_t, negative, position=s_t,
-                variant=contrast_variant)
+                s_g, s_t, negative, position=s_t, variant=contrast_variant,
+                window=None if window is None else straight_window(s_t, s_g, length))
             parts["loss_negative"] = (observed - towards_goal).mean()
         if stage == 2:
             positive = tensordict["positive"]
             s_t, s_tk = positive["embedding"], positive["previous_embedding"]
-            observed = self.directional_reward(s_t, s_tk, positive)
-            opposite = self.directional_reward(s_tk, s_t, positive, position=s_t,
-                                               variant=contrast_variant)
+            window = _window(positive, length)
+            observed = self.directional_reward(s_t, s_tk, positive, window=window)
+            opposite = self.directional_reward(
+                s_tk, s_t, positive, position=s_t, variant=contrast_variant,
+                window=None if window is None else window.flip(-2))
             parts["loss_positive"] = (opposite - observed).mean()
         total = sum(parts.values(), self.goal_image_embedding.new_zeros(()))
         out = {name: value.detach() for name, value in parts.items()}
         out["loss_directional"] = total
         out["stage"] = torch.tensor(stage)
         return TensorDict(out, [])
+
+
+class CertaintyLoss(LossModule):
+    """Squared error of the directional reward to the certainty target (beyond the thesis,
+    section 6.4 proposal), for rewards registered with ``objective="certainty"`` (d_certainty).
+
+    The thesis's directional loss only pushes directions up or down, so finetuned D3 saturates
+    like an indicator; the proposal trains towards a target t instead. Here t is the kernel
+    certainty of :func:`~temporal_torchrl.rewards.direction_certainty`, computed from the batch
+    itself: the references are the batch's labelled states (position s_t, observed direction
+    Δs_t = s_t - s_{t-k}, +1 for positives, -1 for negatives), and the queries are the four
+    directions of the thesis's directional loss at s_t:
+
+        L_neg = mean (r_D(s_t, Δs_t) - t(s_t, Δs_t))^2 + mean (r_D(s_t, Δ̂s_t) - t(s_t, Δ̂s_t))^2
+        L_pos = mean (r_D(s_t, Δs_t) - t(s_t, Δs_t))^2 + mean (r_D(s_t, Δ̄s_t) - t(s_t, Δ̄s_t))^2
+
+    on negative (stage 1 and 2) and positive (stage 2) states, with Δ̂s_t = s_g - s_t towards the
+    goal image embedding and Δ̄s_t = s_{t-k} - s_t the opposite direction; ``loss_certainty`` is
+    their sum. The certainty replaces the directional loss's fixed preference (observed negative
+    and opposite down, towards-goal and observed positive up): a direction is pushed to +1 or -1
+    only as far as the positives and negatives near it agree, and to 0 where none are near
+    (towards-goal and opposite directions mostly are). The observed directions are their own
+    references, so each leaves itself out (a state is not its own evidence).
+
+    Beta and c come from the reward (``reward.certainty_bandwidth``, ``certainty_prior``); the
+    loss owns no state besides s_g, which the recipe saves.
+
+    Args:
+        reward: the :class:`TemporalReward` whose directional heads are trained; its reward must
+            score one direction ``s - s_prev`` (not a window).
+        goal_image_embedding: s_g ``[D]``.
+    """
+
+    #: The key of the loss to minimise in the output.
+    loss_key = "loss_certainty"
+
+    def __init__(self, reward: TemporalReward, goal_image_embedding: Tensor) -> None:
+        super().__init__()
+        if reward.directional_heads is None:
+            raise ValueError("reward.directional=None: a certainty loss needs a directional "
+                             f"reward with heads, e.g. d_certainty; one of "
+                             f"{', '.join(DIRECTIONAL)}.")
+        if reward.window_length is not None:
+            raise ValueError(f"reward.directional={reward.directional!r} reads a window; the "
+                             "certainty target is defined for one direction s_t - s_(t-k).")
+        self.heads = reward.directional_heads
+        _reference(self, reward)
+        self.register_buffer("goal_image_embedding",
+                             torch.as_tensor(goal_image_embedding, dtype=torch.float32).clone())
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDict:
+        """Losses for one batch: ``loss_certainty`` (to minimise), its parts, the mean targets
+        of the observed directions, and ``stage``."""
+        remember_certainty_references(self.reward, tensordict)
+        stage = 2 if "positive" in tensordict.keys() else 1
+        groups = {name: tensordict[name] for name in ("negative", "positive")
+                  if name in tensordict.keys()}
+        zero = self.goal_image_embedding.new_zeros(())
+        if not groups:
+            return TensorDict({"loss_certainty": zero, "stage": torch.tensor(stage)}, [])
+        positions, directions, labels = _references(groups)
+        scales = reference_scales(positions, directions)
+
+        def certainty(position: Tensor, direction: Tensor, exclude: Tensor | None = None
+                      ) -> Tensor:
+            return direction_certainty(position, direction, positions, directions, labels,
+                                       bandwidth=self.reward.certainty_bandwidth,
+                                       prior=self.reward.certainty_prior, scales=scales,
+                                       exclude=exclude)
+
+        leave_one_out = torch.eye(labels.numel(), dtype=torch.bool, device=labels.device)
+        observed_targets = certainty(positions, directions, leave_one_out).split(
+            [states.shape[0] for states in groups.values()])
+        out, parts = {}, {}
+        for (name, states), observed_target in zip(groups.items(), observed_targets,
+                                                   strict=True):
+            s_t, s_tk, s_0 = (states["embedding"], states["previous_embedding"],
+                              states["initial_embedding"])
+            # The contrasted direction of the thesis's loss: towards s_g, or back to s_(t-k).
+            end = self.goal_image_embedding.expand_as(s_t) if name == "negative" else s_tk
+            observed = self.reward.directional_reward(s_t, s_tk, s_0)
+            contrasted = self.reward.directional_reward(end, s_t, s_0, position=s_t)
+            parts[f"loss_certainty_{name}"] = (
+                (observed - observed_target).pow(2).mean()
+                + (contrasted - certainty(s_t, end - s_t)).pow(2).mean())
+            out[f"target_{name}"] = observed_target.mean()
+        out.update({key: value.detach() for key, value in parts.items()})
+        out["loss_certainty"] = sum(parts.values(), zero)
+        out["stage"] = torch.tensor(stage)
+        return TensorDict(out, [])
+
+
+def finetuning_losses(reward: TemporalReward, goal_image_embedding: Tensor, *,
+                      delta: float = 0.1, l2_margin: float = 0.2,
+                      same_position: bool = True) -> list[LossModule]:
+    """The losses that finetune ``reward``'s heads, by each part's registered objective
+    (:func:`~temporal_torchrl.rewards.register_reward`): :class:`PositionalRankingLoss` for a
+    positional part with heads, :class:`DirectionalLoss` or :class:`CertaintyLoss` for a
+    directional part with heads. Give each its own optimizer over ``loss.parameters()``.
+
+    Args:
+        reward: the reward whose heads are trained.
+        goal_image_embedding: s_g ``[D]``.
+        delta, l2_margin: of :class:`PositionalRankingLoss`.
+        same_position: of :class:`DirectionalLoss`.
+    """
+    losses: list[LossModule] = []
+    if reward.positional_heads is not None:
+        losses.append(PositionalRankingLoss(reward, goal_image_embedding, delta=delta,
+                                            l2_margin=l2_margin))
+    if reward.directional_heads is not None:
+        if objective_of(reward.directional) == "certainty":
+            losses.append(CertaintyLoss(reward, goal_image_embedding))
+        else:
+            losses.append(DirectionalLoss(reward, goal_image_embedding,
+                                          same_position=same_position))
+    return losses
+
+
+def remember_certainty_references(reward: TemporalReward, tensordict: TensorDictBase) -> None:
+    """Refresh ``reward.certainty`` (``certainty_scaling``) with the batch's labelled states; a
+    no-op without it or without labelled states."""
+    groups = {name: tensordict[name] for name in ("negative", "positive")
+              if name in tensordict.keys()}
+    if reward.certainty is not None and groups:
+        reward.certainty.remember(*_references(groups))
+
+
+def _references(groups: dict[str, TensorDictBase]) -> tuple[Tensor, Tensor, Tensor]:
+    """Positions s_t, observed directions s_t - s_(t-k) and labels (+1 positive, -1 negative)
+    of the batch's states, in the order of ``groups``."""
+    positions = torch.cat([states["embedding"] for states in groups.values()])
+    directions = torch.cat([states["embedding"] - states["previous_embedding"]
+                            for states in groups.values()])
+    labels = torch.cat([torch.full((states.shape[0],), 1.0 if name == "positive" else -1.0)
+                        for name, states in groups.items()])
+    return positions, directions, labels.to(positions.device)
+
+
+def _window(states: TensorDictBase, length: int | None) -> Tensor | None:
+    """The states' ``embedding_window`` when the reward reads one (``length`` not None)."""
+    if length is None:
+        return None
+    window = states.get("embedding_window", None)
+    if window is None:
+        raise KeyError(f"the reward reads a window of {length} embeddings but the batch has no "
+                       "'embedding_window'; build the replay buffer with "
+                       f"EpisodeReplayBuffer(..., window_length={length}).")
+    return window
 
 
 def _reference(loss: LossModule, reward: TemporalReward) -> None:

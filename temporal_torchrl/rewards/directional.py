@@ -10,6 +10,12 @@ The direction is always ``s - s_prev``; D3-D5 also read a position part computed
 - towards the goal:   ``fn(heads, s_g, s_prev=s_t, position=s_t)``
 - opposite direction: ``fn(heads, s_{t-k}, s_prev=s_t, position=s_t)``
 
+Beyond the thesis (section 6.3 proposal), :func:`d_sequence` reads the window of the last K
+embeddings s_{t-K+1} .. s_t (``window``) instead of one direction: the sequence of its K - 1 steps,
+each at the position, through a small sequence encoder. Its counterparts of the directional loss's
+directions are whole paths: :func:`straight_window` towards the goal, the window reversed for the
+opposite direction.
+
 Zero directions: at the start of an episode s_{t-k} = s_0 = s_t, so Δs_t = 0. Every normalisation
 divides by max(||x||, eps) (:data:`~temporal_torchrl.rewards.positional.EPS`), which maps the zero
 vector to zero: D1 and D3-D5 then feed the head a zero direction part (finite output), and D2's
@@ -106,9 +112,62 @@ def d5(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor
     return _concatenated(heads, regularised, s - s_prev, g, b)
 
 
-# The built-in directional rewards, into DIRECTIONAL; d3-d5 read position ⊕ direction (2·D).
+def window_tokens(window: Tensor, position: Tensor | None = None) -> Tensor:
+    """The tokens of d_sequence's image head: x_j = n(p) ⊕ n(w_j - w_{j-1}), j = 1 .. K - 1.
+
+    ``window [..., K, D]`` holds w_0 .. w_{K-1} (oldest first); ``position`` p (``[..., D]``,
+    default the newest entry w_{K-1}) broadcasts over the window. Returns ``[..., K - 1, 2 D]``:
+    each step of the window as D3's image input, read at one position. Zero steps (the padding
+    with s_0 at an episode start) stay zero after :func:`unit`.
+    """
+    if window.ndim < 2 or window.shape[-2] < 2:
+        raise ValueError(f"window of shape {tuple(window.shape)}; expected [..., K, D] with "
+                         "K >= 2 embeddings (K - 1 steps).")
+    position = window[..., -1, :] if position is None else position
+    steps = unit(window[..., 1:, :] - window[..., :-1, :])
+    position_part, steps = torch.broadcast_tensors(unit(position).unsqueeze(-2), steps)
+    return torch.cat((position_part, steps), dim=-1)
+
+
+def straight_window(start: Tensor, end: Tensor, length: int) -> Tensor:
+    """The window of ``length`` embeddings moving in equal steps from ``start`` to ``end``:
+    w_j = start + j/(K - 1) (end - start), shape ``[..., K, D]`` (inputs broadcast).
+
+    Every step of it is (end - start)/(K - 1), so at the position ``start`` d_sequence reads the
+    direction end - start in every token: the window counterpart of the directional loss's
+    direction towards the goal, s_g - s_t.
+    """
+    if isinstance(length, bool) or not isinstance(length, int) or length < 2:
+        raise ValueError(f"length={length!r}; expected an integer >= 2 (a window of K >= 2 "
+                         "embeddings).")
+    start, end = torch.broadcast_tensors(start, end)
+    fractions = torch.linspace(0.0, 1.0, length, dtype=start.dtype, device=start.device)
+    return start.unsqueeze(-2) + fractions.unsqueeze(-1) * (end - start).unsqueeze(-2)
+
+
+def d_sequence(heads: RewardHeads, s: Tensor, *, window: Tensor | None = None, g: Tensor,
+               b: Tensor, position: Tensor | None = None, **unused) -> Tensor:
+    """d_sequence, the short-horizon sequence directional reward (beyond the thesis, section
+    6.3 proposal):
+    r(s_t, W_t) = csim(f^D_{W_I}(x_1 .. x_{K-1}), f^D_{W_L}(g - b)),
+    x_j = n(s_t) ⊕ n(w_j - w_{j-1}),  W_t = (w_0 .. w_{K-1}) = (s_{t-K+1} .. s_t),
+    with f^D_{W_I} a :class:`~temporal_torchrl.rewards.heads.SequenceEncoder` over the K - 1
+    tokens (:func:`window_tokens`): every step of the recent past at the current position, in
+    order. The position s_t is ``position`` (default the newest embedding of the window).
+
+    With K = 2 the single token n(s_t) ⊕ n(s_t - s_{t-1}) is D3's image input with k = 1, so
+    d_sequence is D3 whose one k-step direction is replaced by the ordered sequence of steps.
+    ``s`` and ``s_prev`` are not read: the window carries the direction.
+    """
+    window = _required(window, "window", "d_sequence")
+    return cosine_similarity(heads.image(window_tokens(window, position)), heads.text(g - b))
+
+
+# The built-in directional rewards, into DIRECTIONAL; d3-d5 read position ⊕ direction (2·D),
+# d_sequence a window of K embeddings (K - 1 tokens of 2·D).
 register_reward("d1", d1, kind="directional", image_input="embedding")
 register_reward("d2", d2, kind="directional", image_input="embedding")
 register_reward("d3", d3, kind="directional", image_input="concatenated")
 register_reward("d4", d4, kind="directional", image_input="concatenated")
 register_reward("d5", d5, kind="directional", image_input="concatenated")
+register_reward("d_sequence", d_sequence, kind="directional", image_input="window")

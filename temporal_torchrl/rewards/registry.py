@@ -1,7 +1,8 @@
 """The reward registries: :data:`POSITIONAL`, :data:`DIRECTIONAL` and each reward's head layout.
 
 Every reward, built-in or a researcher's own, is added with :func:`register_reward`, which records
-the function under its name and what its image head reads (:data:`IMAGE_INPUTS`).
+the function under its name, what its image head reads (:data:`IMAGE_INPUTS`) and the finetuning
+objective that trains its heads (:data:`OBJECTIVES`).
 :func:`~temporal_torchrl.rewards.heads.heads_input_dims` and
 :class:`~temporal_torchrl.rewards.TemporalReward` build the heads from that record, so a
 registered name works everywhere a built-in does. The built-ins register themselves at the end of
@@ -21,8 +22,14 @@ RewardFunction = Callable[..., Tensor]
 #: Reward kinds, the registries they go into.
 KINDS = ("positional", "directional")
 #: What an image head can read: one embedding ``[D]``, the concatenation of a position part and a
-#: direction part ``[2 D]``, or nothing (None: a zero-shot reward without heads).
-IMAGE_LAYOUTS = ("embedding", "concatenated", None)
+#: direction part ``[2 D]``, a sequence of such concatenations built from the window of the last
+#: K embeddings (``"window"``: ``[K - 1, 2 D]``, read by a sequence encoder), or nothing (None: a
+#: zero-shot reward without heads).
+IMAGE_LAYOUTS = ("embedding", "concatenated", "window", None)
+#: Finetuning objectives, by the loss that trains the heads: FuRL's ranking losses (positional
+#: rewards), the thesis's directional loss, and the squared error to a certainty target (beyond
+#: the thesis, section 6.4 proposal); see :mod:`temporal_torchrl.objectives`.
+OBJECTIVES_BY_KIND = {"positional": ("ranking",), "directional": ("directional", "certainty")}
 
 #: Positional reward functions r_P by name.
 POSITIONAL: dict[str, RewardFunction] = {}
@@ -30,28 +37,33 @@ POSITIONAL: dict[str, RewardFunction] = {}
 DIRECTIONAL: dict[str, RewardFunction] = {}
 #: The image-head layout of every registered reward, by name (one of :data:`IMAGE_LAYOUTS`).
 IMAGE_INPUTS: dict[str, str | None] = {}
+#: The finetuning objective of every registered reward, by name (see :data:`OBJECTIVES_BY_KIND`).
+OBJECTIVES: dict[str, str] = {}
 
 _REGISTRIES = {"positional": POSITIONAL, "directional": DIRECTIONAL}
 # Every keyword a reward function is called with (TemporalReward and the finetuning losses).
 _CALL_KEYWORDS = {"s0": None, "s_prev": None, "g": None, "b": None, "alpha": 0.4,
-                  "projection": "origin", "position": None}
+                  "projection": "origin", "position": None, "window": None}
 _SIGNATURE = ("fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=0.4, position=None, "
-              "projection='origin', **unused)")
+              "projection='origin', window=None, **unused)")
 
 
 def register_reward(name: str, function: RewardFunction, *, kind: str,
-                    image_input: str | None = "embedding", overwrite: bool = False) -> None:
+                    image_input: str | None = "embedding", objective: str | None = None,
+                    overwrite: bool = False) -> None:
     """Add a reward function under ``name`` so :class:`TemporalReward` can use it.
 
     The function goes into :data:`POSITIONAL` (``kind="positional"``) or :data:`DIRECTIONAL`
-    (``kind="directional"``), and ``image_input`` is recorded so
+    (``kind="directional"``), ``image_input`` is recorded so
     :func:`~temporal_torchrl.rewards.heads.heads_input_dims` and :class:`TemporalReward` build
-    heads of the right sizes. A name is unique across both kinds.
+    heads of the right sizes, and ``objective`` so the training recipe (and
+    :func:`~temporal_torchrl.objectives.finetuning_losses`) trains the heads with the right loss.
+    A name is unique across both kinds.
 
     The function must have the signature of the built-ins::
 
         fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=0.4, position=None,
-           projection="origin", **unused) -> Tensor
+           projection="origin", window=None, **unused) -> Tensor
 
     - ``heads``: the :class:`~temporal_torchrl.rewards.RewardHeads` (``heads.image``,
       ``heads.text``), or None when ``image_input=None``.
@@ -61,6 +73,9 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
     - ``g``, ``b``: goal and baseline text embeddings ``[D]``.
     - ``alpha``, ``projection``: goal-baseline regularisation strength and form (see
       :func:`~temporal_torchrl.rewards.goal_baseline_regularise`).
+    - ``window``: the last K embeddings s_{t-K+1} .. s_t ``[..., K, D]`` (oldest first, padded
+      with s_0 at the episode start), given to rewards registered with
+      ``image_input="window"``, None for the others.
     - ``**unused``: callers pass every keyword above; a reward ignores those it does not need.
     - Returns the reward, shape ``s.shape[:-1]`` (differentiable in the heads' parameters for
       the finetuning losses).
@@ -71,12 +86,18 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         kind: ``"positional"`` or ``"directional"``.
         image_input: what the image head reads: ``"embedding"`` (D inputs, like furl, p1-p4, d1,
             d2), ``"concatenated"`` (2·D inputs: a position part and a direction part, like
-            d3-d5) or None (zero-shot, no heads, like liv). The text head always reads D inputs.
+            d3-d5), ``"window"`` (a sequence encoder over K - 1 tokens of 2·D, like d_sequence:
+            the reward then receives ``window``) or None (zero-shot, no heads, like liv). The
+            text head always reads D inputs.
+        objective: the loss that finetunes the heads: ``"ranking"`` (positional rewards, the
+            default for them), ``"directional"`` (the thesis's directional loss, the default
+            for directional rewards) or ``"certainty"`` (directional rewards trained towards a
+            certainty target, like d_certainty). Ignored for zero-shot rewards.
         overwrite: replace a reward already registered under ``name`` (of either kind).
 
     Raises:
-        ValueError: for a bad ``name``, ``function``, ``kind`` or ``image_input``, or a ``name``
-            already registered without ``overwrite=True``.
+        ValueError: for a bad ``name``, ``function``, ``kind``, ``image_input`` or
+            ``objective``, or a ``name`` already registered without ``overwrite=True``.
 
     Example:
         >>> import torch
@@ -110,7 +131,20 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         raise ValueError(
             f"register_reward({name!r}): image_input={image_input!r}; expected 'embedding' "
             "(the image head reads D inputs), 'concatenated' (2*D inputs: position part and "
-            "direction part) or None (zero-shot, no heads).")
+            "direction part), 'window' (a sequence encoder over the last K embeddings) or None "
+            "(zero-shot, no heads).")
+    if image_input == "window" and kind != "directional":
+        raise ValueError(f"register_reward({name!r}): image_input='window' is for directional "
+                         "rewards (the window's steps are its directions); got kind="
+                         f"{kind!r}.")
+    objective = OBJECTIVES_BY_KIND[kind][0] if objective is None else objective
+    if objective not in OBJECTIVES_BY_KIND[kind]:
+        raise ValueError(f"register_reward({name!r}): objective={objective!r}; a {kind} "
+                         f"reward is trained with one of {', '.join(OBJECTIVES_BY_KIND[kind])}.")
+    if objective == "certainty" and image_input not in ("embedding", "concatenated"):
+        raise ValueError(f"register_reward({name!r}): objective='certainty' needs a reward of "
+                         "one direction s - s_prev (image_input 'embedding' or "
+                         f"'concatenated'); got image_input={image_input!r}.")
     if not callable(function):
         raise ValueError(f"register_reward({name!r}): function={function!r} is not callable; "
                          f"expected a function {_SIGNATURE}.")
@@ -124,6 +158,7 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         unregister_reward(name)
     _REGISTRIES[kind][name] = function
     IMAGE_INPUTS[name] = image_input
+    OBJECTIVES[name] = objective
 
 
 def unregister_reward(name: str) -> None:
@@ -138,6 +173,7 @@ def unregister_reward(name: str) -> None:
     POSITIONAL.pop(name, None)
     DIRECTIONAL.pop(name, None)
     del IMAGE_INPUTS[name]
+    del OBJECTIVES[name]
 
 
 def image_input_of(name: str) -> str | None:
@@ -157,6 +193,17 @@ def image_input_of(name: str) -> str | None:
             "'concatenated' | None) instead of assigning to the dict.")
     raise ValueError(f"Unknown reward variant {name!r}; expected one of "
                      f"{', '.join(IMAGE_INPUTS)}, or register it with register_reward().")
+
+
+def objective_of(name: str) -> str:
+    """The finetuning objective (see :data:`OBJECTIVES_BY_KIND`) of the reward registered as
+    ``name``.
+
+    Raises:
+        ValueError: for an unknown name, or one not added through :func:`register_reward`.
+    """
+    image_input_of(name)  # Raises for an unknown or unregistered name.
+    return OBJECTIVES[name]
 
 
 def _check_signature(name: str, function: RewardFunction) -> None:

@@ -5,6 +5,11 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
+from temporal_torchrl.rewards.certainty import (
+    CERTAINTY_BANDWIDTH,
+    CERTAINTY_PRIOR,
+    CertaintyMemory,
+)
 from temporal_torchrl.rewards.directional import DIRECTIONAL
 from temporal_torchrl.rewards.heads import RewardHeads, heads_input_dims
 from temporal_torchrl.rewards.positional import POSITIONAL, PROJECTIONS
@@ -34,11 +39,27 @@ class TemporalReward(nn.Module):
         alpha: goal-baseline regularisation strength in [0, 1] (P3, P4, D5).
         projection: ``"origin"`` (the thesis's release) or ``"line"`` (VLM-RMs); see
             :mod:`temporal_torchrl.rewards.positional`.
+        window_length: K, the number of embeddings s_{t-K+1} .. s_t a ``"window"`` reward
+            (d_sequence) reads (>= 2). Like ``k``, configuration for the history transform and
+            the replay buffer, which produce the window; unused by other rewards.
+        certainty_bandwidth, certainty_prior: beta and c of the certainty estimate
+            (:func:`~temporal_torchrl.rewards.certainty.direction_certainty`), read by the
+            certainty loss (d_certainty) and by ``certainty_scaling``.
+        certainty_scaling: the multiplicative option of the thesis's section 6.4 proposal
+            (beyond the thesis): the directional reward that :meth:`forward` returns is
+            |t(s_t, Δs_t)| r_D, with t from the references of the last finetuning batch
+            (:attr:`certainty`). :meth:`directional_reward`, which the finetuning losses call,
+            stays unscaled: the heads are trained as they are (the "step function"), the
+            factor only shapes the reward the agent sees.
 
     Attributes:
         positional_heads, directional_heads: the trainable :class:`RewardHeads` (f^P, f^D), or None
             when that part is absent or zero-shot (registered with ``image_input=None``, like
             ``"liv"``).
+        window_length: K when a part reads the window (registered with ``image_input="window"``),
+            else None: the history transform and the replay buffer need no window.
+        certainty: the :class:`~temporal_torchrl.rewards.certainty.CertaintyMemory` of
+            ``certainty_scaling`` (None without it).
 
     Example:
         >>> import torch
@@ -54,7 +75,9 @@ class TemporalReward(nn.Module):
     def __init__(self, embedding_dim: int, goal_embedding: Tensor, baseline_embedding: Tensor,
                  positional: str | None = "furl", directional: str | None = None,
                  rho: float = 0.05, lambda_: float = 1.0, k: int = 5, alpha: float = 0.4,
-                 projection: str = "origin"):
+                 projection: str = "origin", window_length: int = 8,
+                 certainty_bandwidth: float = CERTAINTY_BANDWIDTH,
+                 certainty_prior: float = CERTAINTY_PRIOR, certainty_scaling: bool = False):
         super().__init__()
         if isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) \
                 or embedding_dim < 1:
@@ -80,6 +103,16 @@ class TemporalReward(nn.Module):
         if projection not in PROJECTIONS:
             raise ValueError(f"projection={projection!r}; expected one of "
                              f"{', '.join(PROJECTIONS)}.")
+        if isinstance(window_length, bool) or not isinstance(window_length, int) \
+                or window_length < 2:
+            raise ValueError(f"window_length={window_length!r}; expected an integer >= 2 (a "
+                             "window of K embeddings has K - 1 steps).")
+        if not certainty_bandwidth > 0 or not certainty_prior > 0:
+            raise ValueError(f"certainty_bandwidth={certainty_bandwidth!r}, certainty_prior="
+                             f"{certainty_prior!r}; expected both > 0.")
+        if certainty_scaling and directional is None:
+            raise ValueError("certainty_scaling=True scales the directional reward; set "
+                             "directional too.")
         self.embedding_dim = embedding_dim
         self.positional = positional
         self.directional = directional
@@ -88,6 +121,13 @@ class TemporalReward(nn.Module):
         self.k = k
         self.alpha = float(alpha)
         self.projection = projection
+        # Only directional rewards read a window (register_reward enforces it).
+        reads_window = directional is not None and image_input_of(directional) == "window"
+        self.window_length = window_length if reads_window else None
+        self.certainty_bandwidth = float(certainty_bandwidth)
+        self.certainty_prior = float(certainty_prior)
+        self.certainty = (CertaintyMemory(embedding_dim, certainty_bandwidth, certainty_prior)
+                          if certainty_scaling else None)
         self.register_buffer("goal_embedding", self._text_embedding(goal_embedding, "goal"))
         self.register_buffer("baseline_embedding",
                              self._text_embedding(baseline_embedding, "baseline"))
@@ -98,7 +138,10 @@ class TemporalReward(nn.Module):
         """Heads sized by the variant's registered image input; None if absent or zero-shot."""
         if variant is None or image_input_of(variant) is None:
             return None
-        return RewardHeads(*heads_input_dims(variant, self.embedding_dim))
+        sequence_length = (self.window_length - 1 if image_input_of(variant) == "window"
+                           else None)
+        return RewardHeads(*heads_input_dims(variant, self.embedding_dim),
+                           sequence_length=sequence_length)
 
     def _text_embedding(self, value: Tensor, name: str) -> Tensor:
         value = torch.as_tensor(value, dtype=torch.float32)
@@ -116,13 +159,30 @@ class TemporalReward(nn.Module):
                 f"dimension; the reward heads expect embedding_dim={self.embedding_dim}. Use the "
                 "encoder the TemporalReward was built for (its .dim).")
 
+    def _check_window(self, window: Tensor | None) -> None:
+        if self.window_length is None:
+            return
+        if window is None:
+            raise ValueError(
+                f"Reward {self.directional!r} reads the window of the last "
+                f"{self.window_length} embeddings; pass window=... ('embedding_window' from "
+                f"EmbeddingHistoryTransform(window_length={self.window_length}) or "
+                f"EpisodeReplayBuffer(window_length={self.window_length})).")
+        if window.shape[-2:] != (self.window_length, self.embedding_dim):
+            raise ValueError(
+                f"window has shape {tuple(window.shape)}; expected [..., {self.window_length}, "
+                f"{self.embedding_dim}] (window_length={self.window_length}, embedding_dim="
+                f"{self.embedding_dim}). Build the history transform and the replay buffer with "
+                "window_length=reward.window_length.")
+
     def positional_reward(self, embedding: Tensor, initial_embedding: Tensor | None = None,
-                          previous_embedding: Tensor | None = None) -> Tensor:
+                          previous_embedding: Tensor | None = None,
+                          window: Tensor | None = None) -> Tensor:
         """r^VLM_P(s_t) of the configured variant, shape ``embedding.shape[:-1]``.
 
         The env transform, the replay relabelling and the finetuning losses all call this (and
-        :meth:`directional_reward`), so a reward function sees the same ``s0`` and ``s_prev``
-        for the same state everywhere.
+        :meth:`directional_reward`), so a reward function sees the same ``s0``, ``s_prev`` and
+        ``window`` for the same state everywhere.
         """
         self._check_embedding("embedding", embedding)
         if self.positional is None:
@@ -130,50 +190,63 @@ class TemporalReward(nn.Module):
         return POSITIONAL[self.positional](
             self.positional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha, position=None,
-            projection=self.projection)
+            projection=self.projection, window=window)
 
     def directional_reward(self, embedding: Tensor, previous_embedding: Tensor,
                            initial_embedding: Tensor | None = None,
-                           position: Tensor | None = None, variant: str | None = None) -> Tensor:
+                           position: Tensor | None = None, variant: str | None = None,
+                           window: Tensor | None = None) -> Tensor:
         """r^VLM_D of the direction ``embedding - previous_embedding`` at ``position``
-        (default ``embedding``), shape ``embedding.shape[:-1]``.
+        (default ``embedding``), shape ``embedding.shape[:-1]``; a ``"window"`` reward
+        (d_sequence) reads the path ``window`` ``[..., K, D]`` instead (required for it).
 
         ``variant`` scores with another registered directional function on this reward's
         directional heads (the release's contrast terms of the directional loss); default the
-        configured one.
+        configured one. Never scaled by the certainty (see ``certainty_scaling``).
         """
         self._check_embedding("embedding", embedding)
         self._check_embedding("previous_embedding", previous_embedding)
         if self.directional is None:
             raise ValueError("This TemporalReward has no directional part (directional=None).")
+        self._check_window(window)
         return DIRECTIONAL[variant or self.directional](
             self.directional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha,
-            position=position, projection=self.projection)
+            position=position, projection=self.projection, window=window)
 
     def forward(self, embedding: Tensor, initial_embedding: Tensor, previous_embedding: Tensor,
-                success: Tensor) -> dict[str, Tensor]:
-        """All reward parts for embeddings ``[..., D]`` and ``success`` ``[..., 1]``.
+                success: Tensor, window: Tensor | None = None) -> dict[str, Tensor]:
+        """All reward parts for embeddings ``[..., D]`` and ``success`` ``[..., 1]`` (and the
+        ``window`` ``[..., K, D]`` when a part reads it).
 
         Returns a dict with ``"task_reward"`` (success - 1), ``"positional_reward"`` (r_P),
-        ``"directional_reward"`` (r_D), ``"vlm_reward"`` (r_P + lambda r_D) and ``"reward"``
-        (r_task + rho vlm), each float32 ``[..., 1]``; an absent part is 0.
+        ``"directional_reward"`` (r_D, times |t(s_t, Δs_t)| with ``certainty_scaling``),
+        ``"vlm_reward"`` (r_P + lambda r_D) and ``"reward"`` (r_task + rho vlm), each float32
+        ``[..., 1]``; an absent part is 0.
         """
         self._check_embedding("initial_embedding", initial_embedding)
         task = success.to(torch.float32) - 1.0
         zeros = torch.zeros_like(task)
         positional = (self.positional_reward(embedding, initial_embedding,
-                                             previous_embedding).unsqueeze(-1)
+                                             previous_embedding, window).unsqueeze(-1)
                       if self.positional is not None else zeros)
-        directional = (self.directional_reward(embedding, previous_embedding,
-                                               initial_embedding).unsqueeze(-1)
-                       if self.directional is not None else zeros)
+        directional = zeros
+        if self.directional is not None:
+            directional = self.directional_reward(embedding, previous_embedding,
+                                                  initial_embedding, window=window)
+            if self.certainty is not None:
+                directional = directional * self.certainty(
+                    embedding, embedding - previous_embedding).abs()
+            directional = directional.unsqueeze(-1)
         vlm = positional + self.lambda_ * directional
         return {"task_reward": task, "positional_reward": positional,
                 "directional_reward": directional, "vlm_reward": vlm,
                 "reward": task + self.rho * vlm}
 
     def extra_repr(self) -> str:
+        window = "" if self.window_length is None else f", window_length={self.window_length}"
+        scaling = "" if self.certainty is None else ", certainty_scaling=True"
         return (f"embedding_dim={self.embedding_dim}, positional={self.positional!r}, "
                 f"directional={self.directional!r}, rho={self.rho}, lambda_={self.lambda_}, "
-                f"k={self.k}, alpha={self.alpha}, projection={self.projection!r}")
+                f"k={self.k}, alpha={self.alpha}, projection={self.projection!r}{window}"
+                f"{scaling}")

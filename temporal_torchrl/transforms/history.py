@@ -1,26 +1,46 @@
-"""The k-step embedding history: s_0 and s_{t-k} next to every s_t (thesis 4.1, 4.3.2)."""
+"""The k-step embedding history: s_0 and s_{t-k} next to every s_t (thesis 4.1, 4.3.2), and
+optionally the window of the last K embeddings s_{t-K+1} .. s_t (beyond the thesis, section 6.3
+proposal: the input of d_sequence)."""
 
 from __future__ import annotations
 
 import torch
 from tensordict import TensorDictBase
 from torch import Tensor
-from torchrl.data import Composite
+from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
 INITIAL_EMBEDDING_KEY = "initial_embedding"
 PREVIOUS_EMBEDDING_KEY = "previous_embedding"
+WINDOW_KEY = "embedding_window"
+
+
+def episode_windows(embeddings: Tensor, window_length: int) -> Tensor:
+    """The window s_{t-K+1} .. s_t of every state of one episode ``embeddings [T, D]`` (s_0
+    first), padded with s_0 where it would reach before the episode: ``[T, K, D]``.
+
+    The same windows the history transform writes during collection and the replay buffer
+    derives from stored rows, for a whole episode at once (scoring, tests).
+    """
+    if isinstance(window_length, bool) or not isinstance(window_length, int) \
+            or window_length < 2:
+        raise ValueError(f"window_length={window_length!r}; expected an integer >= 2.")
+    steps = torch.arange(embeddings.shape[0], device=embeddings.device)
+    offsets = torch.arange(window_length - 1, -1, -1, device=embeddings.device)
+    return embeddings[(steps.unsqueeze(-1) - offsets).clamp_min(0)]
 
 
 class EmbeddingHistoryTransform(Transform):
-    """Writes ``"initial_embedding"`` (s_0) and ``"previous_embedding"`` (s_{t-k}) at every step.
+    """Writes ``"initial_embedding"`` (s_0) and ``"previous_embedding"`` (s_{t-k}) at every step,
+    and with ``window_length`` also ``"embedding_window"`` (s_{t-K+1} .. s_t, ``[K, D]``).
 
     s_0 is the first embedding of the current episode; s_{t-k} is the embedding k steps back in
-    the same episode, clamped to s_0 while t < k (the history never crosses an episode boundary).
-    Each batch element keeps a ring of its last k + 1 embeddings; a reset fills the ring of every
-    reset element with its new s_0, so partial resets of batched envs (the ``"_reset"`` mask)
-    restart only those elements. A single cursor serves the whole batch because all elements
-    step together.
+    the same episode, clamped to s_0 while t < k (the history never crosses an episode boundary);
+    the window likewise holds s_0 in its slots before the episode's start.
+    Each batch element keeps a ring of its last max(k, K - 1) + 1 embeddings; a reset fills the
+    ring of every reset element with its new s_0, so partial resets of batched envs (the
+    ``"_reset"`` mask) restart only those elements. A single cursor serves the whole batch
+    because all elements step together.
 
     The transform is stateful and runs only inside an environment: a sampled batch already
     carries the two keys as they were collected, so :meth:`forward` raises.
@@ -29,6 +49,8 @@ class EmbeddingHistoryTransform(Transform):
     Args:
         k: history offset (>= 1); use the ``k`` of the :class:`TemporalReward`.
         in_key: the embedding key to track.
+        window_length: K (>= 2), or None for no window; use the ``window_length`` of the
+            :class:`TemporalReward` (None unless its reward reads a window).
 
     Example:
         >>> import torch
@@ -42,22 +64,34 @@ class EmbeddingHistoryTransform(Transform):
         ([1.0, 1.0, 1.0], [0.0, 0.0, 0.0])
     """
 
-    def __init__(self, k: int = 5, in_key: str = "embedding"):
+    def __init__(self, k: int = 5, in_key: str = "embedding", window_length: int | None = None):
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
             raise ValueError(f"k={k!r}; expected an integer >= 1 (the offset of s_(t-k)).")
+        if window_length is not None and (isinstance(window_length, bool)
+                                          or not isinstance(window_length, int)
+                                          or window_length < 2):
+            raise ValueError(f"window_length={window_length!r}; expected None or an integer "
+                             ">= 2 (the K embeddings s_(t-K+1) .. s_t).")
+        out_keys = [INITIAL_EMBEDDING_KEY, PREVIOUS_EMBEDDING_KEY]
         super().__init__(in_keys=[in_key],
-                         out_keys=[INITIAL_EMBEDDING_KEY, PREVIOUS_EMBEDDING_KEY])
+                         out_keys=out_keys + ([WINDOW_KEY] if window_length else []))
         self.k = k
         self.in_key = in_key
-        self._ring: Tensor | None = None  # [*batch, k + 1, D]: s_{t-k} .. s_t
+        self.window_length = window_length
+        # The ring reaches back far enough for both s_{t-k} and the window's oldest s_{t-K+1}.
+        self._size = max(k, (window_length or 1) - 1) + 1
+        self._ring: Tensor | None = None  # [*batch, size, D], slot of s_t at the cursor
         self._initial: Tensor | None = None  # [*batch, D]
         self._cursor = 0  # ring slot of the newest embedding s_t
 
     def _write(self, tensordict: TensorDictBase) -> TensorDictBase:
         # Clones: the ring is updated in place, and the outputs must not change with it.
-        oldest = self._ring[..., (self._cursor + 1) % (self.k + 1), :]
+        previous = self._ring[..., (self._cursor - self.k) % self._size, :]
         tensordict.set(INITIAL_EMBEDDING_KEY, self._initial.clone())
-        tensordict.set(PREVIOUS_EMBEDDING_KEY, oldest.clone())
+        tensordict.set(PREVIOUS_EMBEDDING_KEY, previous.clone())
+        if self.window_length:
+            slots = (self._cursor - torch.arange(self.window_length - 1, -1, -1)) % self._size
+            tensordict.set(WINDOW_KEY, self._ring[..., slots.to(self._ring.device), :])
         return tensordict
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase
@@ -67,7 +101,7 @@ class EmbeddingHistoryTransform(Transform):
             raise KeyError(f"EmbeddingHistoryTransform: {self.in_key!r} is missing at reset; put "
                            "the embedding transform before the history transform.")
         reset = tensordict.get("_reset", None) if tensordict is not None else None
-        ring_shape = (*embedding.shape[:-1], self.k + 1, embedding.shape[-1])
+        ring_shape = (*embedding.shape[:-1], self._size, embedding.shape[-1])
         if (reset is None or self._ring is None or self._ring.shape != ring_shape
                 or self._ring.device != embedding.device):
             self._ring = embedding.unsqueeze(-2).expand(ring_shape).clone()
@@ -84,15 +118,15 @@ class EmbeddingHistoryTransform(Transform):
         if self._ring is None:
             raise RuntimeError("EmbeddingHistoryTransform: step before reset; call env.reset() "
                                "first.")
-        self._cursor = (self._cursor + 1) % (self.k + 1)
+        self._cursor = (self._cursor + 1) % self._size
         self._ring[..., self._cursor, :] = next_tensordict.get(self.in_key)
         return self._write(next_tensordict)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         raise RuntimeError(
             "EmbeddingHistoryTransform is stateful and only runs inside an environment. Sampled "
-            "batches already carry 'initial_embedding' and 'previous_embedding' as collected; "
-            "relabel them with TemporalRewardTransform alone.")
+            "batches already carry 'initial_embedding' and 'previous_embedding' (and "
+            "'embedding_window') as collected; relabel them with TemporalRewardTransform alone.")
 
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
         if self.in_key not in observation_spec.keys(True):
@@ -101,7 +135,13 @@ class EmbeddingHistoryTransform(Transform):
         embedding_spec = observation_spec[self.in_key]
         observation_spec[INITIAL_EMBEDDING_KEY] = embedding_spec.clone()
         observation_spec[PREVIOUS_EMBEDDING_KEY] = embedding_spec.clone()
+        if self.window_length:
+            shape = embedding_spec.shape
+            observation_spec[WINDOW_KEY] = Unbounded(
+                shape=(*shape[:-1], self.window_length, shape[-1]), dtype=embedding_spec.dtype,
+                device=embedding_spec.device)
         return observation_spec
 
     def extra_repr(self) -> str:
-        return f"k={self.k}, in_key={self.in_key!r}"
+        window = f", window_length={self.window_length}" if self.window_length else ""
+        return f"k={self.k}, in_key={self.in_key!r}{window}"

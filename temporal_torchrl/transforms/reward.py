@@ -8,6 +8,7 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
 from temporal_torchrl.rewards.temporal import REWARD_KEYS, TemporalReward
+from temporal_torchrl.transforms.history import WINDOW_KEY
 
 INPUT_KEYS = ("embedding", "initial_embedding", "previous_embedding", "success")
 
@@ -16,7 +17,8 @@ class TemporalRewardTransform(Transform):
     """Overwrites ``"reward"`` with r = r_task + rho (r_P + lambda r_D) (thesis 4.1).
 
     Reads ``"embedding"`` (s_{t+1}), ``"initial_embedding"``, ``"previous_embedding"`` and
-    ``"success"`` of the *next* state and writes ``"task_reward"``, ``"positional_reward"``,
+    ``"success"`` of the *next* state (and ``"embedding_window"`` when the reward reads a window,
+    ``reward.window_length`` not None) and writes ``"task_reward"``, ``"positional_reward"``,
     ``"directional_reward"``, ``"vlm_reward"`` and ``"reward"`` (all float32 ``[..., 1]``), with
     the heads as they are now and without gradient. The extra keys are declared as reward
     entries, so the env has several reward keys: name ``"reward"`` explicitly where TorchRL asks
@@ -51,17 +53,23 @@ class TemporalRewardTransform(Transform):
     def __init__(self, reward: TemporalReward):
         if not isinstance(reward, TemporalReward):
             raise ValueError(f"reward={type(reward).__name__}; expected a TemporalReward.")
-        super().__init__(in_keys=list(INPUT_KEYS), out_keys=list(REWARD_KEYS))
+        input_keys = INPUT_KEYS + ((WINDOW_KEY,) if reward.window_length else ())
+        super().__init__(in_keys=list(input_keys), out_keys=list(REWARD_KEYS))
+        self.input_keys = input_keys
         self.reward = reward
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
-        inputs = [next_tensordict.get(key, None) for key in INPUT_KEYS]
-        missing = [key for key, value in zip(INPUT_KEYS, inputs, strict=True) if value is None]
+        inputs = [next_tensordict.get(key, None) for key in self.input_keys]
+        missing = [key for key, value in zip(self.input_keys, inputs, strict=True)
+                   if value is None]
         if missing:
+            window = (f" (EmbeddingHistoryTransform(window_length={self.reward.window_length}), "
+                      f"EpisodeReplayBuffer(window_length={self.reward.window_length}))"
+                      if WINDOW_KEY in missing else "")
             raise KeyError(
-                f"TemporalRewardTransform: missing {missing} (needs {list(INPUT_KEYS)}). In an env "
-                "put EmbeddingTransform and EmbeddingHistoryTransform before it; a stored batch "
-                "must keep those keys under 'next'.")
+                f"TemporalRewardTransform: missing {missing} (needs {list(self.input_keys)}). In "
+                "an env put EmbeddingTransform and EmbeddingHistoryTransform before it; a stored "
+                f"batch must keep those keys under 'next'{window}.")
         with torch.no_grad():
             rewards = self.reward(*inputs)
         for key, value in rewards.items():
