@@ -1,0 +1,362 @@
+"""Offline reward-quality benchmark: score every reward variant for a task and an encoder.
+
+For each task: collect (or load from the cache) embedded successful expert episodes and failed
+episodes (uniform random actions, heavily noised experts), split them by episode into a training
+and a held-out part, then for each reward variant score the rewards on the held-out part before
+and after finetuning its heads offline on the training part with the package's own losses:
+
+- positional variants: value-order correlation (VOC) along successful episodes and AUROC of the
+  per-step reward, successful against failed steps;
+- directional variants: direction accuracy (real order against the episode played backwards)
+  and AUROC;
+- zero-shot variants (``liv``): the same, without heads.
+
+    python recipes/evaluate_rewards.py                                   # drawer-open, all variants
+    python recipes/evaluate_rewards.py env.task=door-open finetune.updates=2000
+    python recipes/evaluate_rewards.py encoder.name=liv encoder.checkpoint=/path/to/model.pt
+    python recipes/evaluate_rewards.py reward.modules=[my_rewards.py] reward.positional=[furl,p5]
+    python recipes/evaluate_rewards.py reward.directional=[d3,d_certainty,d_sequence]
+    python recipes/evaluate_rewards.py \
+        env.task=[drawer-open,door-open,window-open,window-close,push,button-press-topdown]
+
+Outputs in ``<output_dir>/<task>/``: ``results.md``, ``results.json`` and ``figures/<variant>.png``
+(the reward along one held-out successful and one failed episode, as the thesis's Figure 5.12);
+with several tasks also ``<output_dir>/summary.md`` and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import hydra
+import torch
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig, ListConfig, OmegaConf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import utils  # noqa: E402
+
+from temporal_torchrl.data import EpisodeReplayBuffer, goal_image_embedding  # noqa: E402
+from temporal_torchrl.encoders import ENCODERS, Encoder  # noqa: E402
+from temporal_torchrl.envs import TASKS, get_task  # noqa: E402
+from temporal_torchrl.evaluation import (  # noqa: E402
+    DatasetSpec,
+    finetune_reward,
+    load_or_collect,
+    make_finetuning_buffer,
+    report,
+    reward_curve,
+    score_reward,
+    split_by_episode,
+    success_length,
+    variant_reward,
+)
+from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL  # noqa: E402
+
+_GROUPS = ("env", "encoder", "reward", "dataset", "finetune")
+
+
+# --------------------------------------------------------------------------- configuration
+def _is_integer(value: Any, minimum: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+#: (key, check, what is expected) for the numeric settings; null is allowed where noted.
+_CHECKS = (
+    ("env.seed", lambda v: _is_integer(v, 0), "an integer >= 0"),
+    ("env.max_episode_steps", lambda v: _is_integer(v, 1), "an integer >= 1"),
+    ("env.image_size", lambda v: _is_integer(v, 1), "an integer >= 1"),
+    ("reward.k", lambda v: _is_integer(v, 1), "an integer >= 1"),
+    ("reward.alpha", lambda v: _is_number(v) and 0 <= v <= 1, "a number in [0, 1]"),
+    ("reward.delta", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    ("reward.l2_margin", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    ("reward.gap", lambda v: _is_integer(v, 1), "an integer >= 1"),
+    ("reward.batch_size", lambda v: _is_integer(v, 1), "an integer >= 1"),
+    ("reward.lr", lambda v: _is_number(v) and v > 0, "a number > 0"),
+    ("reward.label_window", lambda v: v is None or _is_integer(v, 1),
+     "an integer >= 1, or null"),
+    ("reward.window", lambda v: _is_integer(v, 2), "an integer >= 2"),
+    ("reward.certainty_bandwidth", lambda v: _is_number(v) and v > 0, "a number > 0"),
+    ("reward.certainty_prior", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    ("dataset.expert_episodes", lambda v: _is_integer(v, 2), "an integer >= 2"),
+    ("dataset.random_episodes", lambda v: _is_integer(v, 0), "an integer >= 0"),
+    ("dataset.failed_expert_episodes", lambda v: _is_integer(v, 0), "an integer >= 0"),
+    ("dataset.expert_noise", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    ("dataset.expert_steps_after_success", lambda v: v is None or _is_integer(v, 0),
+     "an integer >= 0, or null"),
+    ("dataset.failure_noise", lambda v: _is_number(v) and v > 0, "a number > 0"),
+    ("dataset.max_attempts", lambda v: _is_integer(v, 1), "an integer >= 1"),
+    ("dataset.held_out_fraction", lambda v: _is_number(v) and 0 < v < 1,
+     "a fraction in (0, 1)"),
+    ("finetune.updates", lambda v: _is_integer(v, 0), "an integer >= 0"),
+    ("finetune.stage", lambda v: v in (1, 2), "1 (failed episodes only) or 2"),
+    ("threads", lambda v: v is None or _is_integer(v, 1), "an integer >= 1, or null"),
+)
+
+
+def _named(value: Any) -> bool:
+    """Whether a variant entry names a reward (``none`` and null do not)."""
+    return value is not None and str(value).lower() != "none"
+
+
+def _bad(key: str, value: Any, expected: str) -> ValueError:
+    return ValueError(f"config {key}={value!r} is invalid: expected {expected}. "
+                      f"Fix it on the command line, e.g. {key}=<value>.")
+
+
+def _as_list(value: Any) -> list:
+    """A config value that may be one item or a list of them, as a list."""
+    return list(value) if isinstance(value, ListConfig | list | tuple) else [value]
+
+
+def config_tasks(cfg: DictConfig) -> list[str]:
+    """``env.task`` as a list of task names (one name or a list of them)."""
+    return _as_list(cfg.env.task)
+
+
+def config_variants(cfg: DictConfig) -> list[str]:
+    """The variants to score: ``reward.positional`` then ``reward.directional`` (``none``
+    dropped; either may be one name or a list)."""
+    return [str(name) for key in ("positional", "directional")
+            for name in _as_list(cfg.reward[key]) if _named(name)]
+
+
+def validate_config(cfg: DictConfig) -> None:
+    """Stop before any work on a bad value, naming the config key (ValueError).
+
+    Imports ``reward.modules`` first, so the rewards they register are known.
+    """
+    for group in _GROUPS:
+        if not isinstance(cfg.get(group), DictConfig):
+            raise _bad(group, cfg.get(group), f"a group of settings (set its keys one by one, "
+                       f"e.g. {group}.<key>=<value>)")
+    utils.import_reward_modules(cfg.reward.modules)
+    tasks = config_tasks(cfg)
+    unknown = [task for task in tasks if task not in TASKS]
+    if not tasks or unknown:
+        raise _bad("env.task", cfg.env.task, "a Metaworld MT50 task name such as drawer-open, "
+                   f"or a list of them ({len(TASKS)} known: see temporal_torchrl.envs.TASKS)")
+    if cfg.encoder.name not in ENCODERS:
+        raise _bad("encoder.name", cfg.encoder.name, f"one of {', '.join(ENCODERS)}")
+    for key, registry in (("positional", POSITIONAL), ("directional", DIRECTIONAL)):
+        names = _as_list(cfg.reward[key])
+        if any(_named(name) and name not in registry for name in names):
+            raise _bad(f"reward.{key}", names, f"none or a list of {', '.join(registry)} (your "
+                       "own: register_reward in a module listed in reward.modules)")
+    if not config_variants(cfg):
+        raise _bad("reward.positional", cfg.reward.positional,
+                   "at least one variant to score in reward.positional or reward.directional")
+    for key, ok, expected in _CHECKS:
+        value = OmegaConf.select(cfg, key)
+        if not ok(value):
+            raise _bad(key, value, expected)
+    if cfg.reward.projection not in ("origin", "line"):
+        raise _bad("reward.projection", cfg.reward.projection, "origin or line")
+    if max(cfg.dataset.random_episodes, cfg.dataset.failed_expert_episodes) < 2:
+        raise _bad("dataset.random_episodes", cfg.dataset.random_episodes,
+                   "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "
+                   "episodes of each kind, and a kind needs 2 to appear in both the training "
+                   "and the held-out part)")
+    if not isinstance(cfg.reward.baseline, str) or not cfg.reward.baseline.strip():
+        raise _bad("reward.baseline", cfg.reward.baseline, "generic, tailored or a text")
+    if cfg.reward.baseline == "tailored":
+        lacking = [task for task in tasks if get_task(task).tailored_baseline is None]
+        if lacking:
+            raise _bad("reward.baseline", "tailored", f"generic or a text: {', '.join(lacking)} "
+                       "has no tailored baseline (only the thesis's six evaluation tasks do)")
+    device = torch.device(cfg.encoder.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise _bad("encoder.device", cfg.encoder.device,
+                   "cpu: torch finds no CUDA GPU on this machine")
+
+
+def task_config(cfg: DictConfig, task: str) -> DictConfig:
+    """``cfg`` with ``env.task`` set to one task."""
+    single = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
+    single.env.task = task
+    return single
+
+
+def machine_description() -> str:
+    """The CPU model, core count, GPU if any, and torch's version and threads."""
+    model = platform.processor() or platform.machine()
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.is_file():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    gpu = f", GPU {torch.cuda.get_device_name(0)}" if torch.cuda.is_available() else ", no GPU"
+    return (f"{model}, {os.cpu_count()} CPU cores{gpu}; torch {torch.__version__}, "
+            f"{torch.get_num_threads()} torch threads")
+
+
+def dataset_spec(cfg: DictConfig) -> DatasetSpec:
+    return DatasetSpec(
+        task=cfg.env.task, seed=cfg.env.seed, image_size=cfg.env.image_size,
+        camera=cfg.env.camera, fast_render=cfg.env.fast_render,
+        max_episode_steps=cfg.env.max_episode_steps,
+        expert_episodes=cfg.dataset.expert_episodes,
+        random_episodes=cfg.dataset.random_episodes,
+        failed_expert_episodes=cfg.dataset.failed_expert_episodes,
+        expert_noise=float(cfg.dataset.expert_noise),
+        expert_steps_after_success=cfg.dataset.expert_steps_after_success,
+        failure_noise=float(cfg.dataset.failure_noise),
+        max_attempts=cfg.dataset.max_attempts)
+
+
+# --------------------------------------------------------------------------- one task
+def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
+    """Collect or load the task's dataset, then score every variant; returns the result dict
+    (:mod:`temporal_torchrl.evaluation.report`) and writes it under ``output_dir/<task>``."""
+    start = time.perf_counter()
+    task = get_task(cfg.env.task)
+    encoder_options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
+    dataset = load_or_collect(dataset_spec(cfg), encoder, cfg.dataset.cache_dir,
+                              encoder_description={"options": encoder_options})
+    dataset_seconds = time.perf_counter() - start
+    train_indices, held_out_indices = split_by_episode(
+        dataset.kinds, cfg.dataset.held_out_fraction, cfg.env.seed)
+    train, held_out = dataset.subset(train_indices), dataset.subset(held_out_indices)
+    successful = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if ok]
+    failed = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if not ok]
+    # The figure's failed episode: a failed expert when there is one (it approaches the goal
+    # for a while, like the thesis's Figure 5.12 negative), else any failed episode.
+    failed_kinds = [kind for kind, ok in zip(held_out.kinds, held_out.successful, strict=True)
+                    if not ok]
+    figure_failed = failed[failed_kinds.index("failed_expert")] \
+        if "failed_expert" in failed_kinds else failed[0]
+    figure_successful = successful[0]
+
+    # s_g from the first training expert, as the training recipe takes it from its first expert.
+    goal_image = goal_image_embedding(next(
+        e for e, ok in zip(train.episodes, train.successful, strict=True) if ok))
+    baseline = utils.baseline_text(cfg)
+    goal_embedding, baseline_embedding = encoder.embed_text([task.goal_prompt, baseline]).cpu()
+    # One buffer per window length (None for every reward that reads no window).
+    buffers: dict[int | None, EpisodeReplayBuffer] = {}
+
+    output = Path(cfg.output_dir) / task.name
+    rows = []
+    for variant in config_variants(cfg):
+        variant_start = time.perf_counter()
+        torch.manual_seed(cfg.env.seed)  # the same initial heads whatever the variant order
+        reward = variant_reward(
+            variant, encoder.dim, goal_embedding, baseline_embedding, k=cfg.reward.k,
+            alpha=cfg.reward.alpha, projection=cfg.reward.projection,
+            window_length=cfg.reward.window, certainty_bandwidth=cfg.reward.certainty_bandwidth,
+            certainty_prior=cfg.reward.certainty_prior)
+        has_heads = (reward.positional_heads is not None
+                     or reward.directional_heads is not None)
+        states = ["untrained", "finetuned"] if has_heads else ["zero-shot"]
+        curves: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+        final_losses: dict[str, float] = {}
+        for state in states:
+            if state == "finetuned":
+                if reward.window_length not in buffers:
+                    buffers[reward.window_length] = make_finetuning_buffer(
+                        train.episodes, stage=cfg.finetune.stage, history=cfg.reward.k,
+                        label_window=cfg.reward.label_window, window_length=reward.window_length)
+                final_losses = finetune_reward(
+                    reward, buffers[reward.window_length], goal_image,
+                    updates=cfg.finetune.updates,
+                    batch_size=cfg.reward.batch_size, gap=cfg.reward.gap, lr=cfg.reward.lr,
+                    delta=cfg.reward.delta, l2_margin=cfg.reward.l2_margin,
+                    same_position=cfg.reward.same_position)
+            scores = score_reward(reward, successful, failed)
+            rows.append({"variant": variant, "kind": scores.kind, "heads": state,
+                         "value_order_correlation": scores.value_order_correlation,
+                         "value_order_correlation_std": scores.value_order_correlation_std,
+                         "direction_accuracy": scores.direction_accuracy,
+                         "auroc": scores.auroc,
+                         "final_losses": final_losses if state == "finetuned" else {},
+                         "seconds": time.perf_counter() - variant_start})
+            curves[state] = (reward_curve(reward, figure_successful),
+                             reward_curve(reward, figure_failed))
+        if cfg.figures:
+            # The trained (or zero-shot) curve first, solid; the untrained one dashed.
+            order = list(reversed(states))
+            report.plot_reward_curves(
+                output / "figures" / f"{variant}.png",
+                f"{task.name}: {variant} ({scores.kind}, {order[0]}), {encoder.name}, "
+                "held-out episodes",
+                {state: curves[state][0] for state in order},
+                {state: curves[state][1] for state in order},
+                success_step=success_length(figure_successful),
+                ylabel=f"r_{'P' if scores.kind == 'positional' else 'D'}")
+        print(f"  {task.name} {variant}: " + "; ".join(
+            f"{row['heads']} {report.metric_text(row)}" for row in rows
+            if row["variant"] == variant) + f" ({rows[-1]['seconds']:.0f} s)", flush=True)
+
+    result = {
+        "task": task.name, "goal": task.goal_prompt, "baseline": baseline,
+        "encoder": {"name": encoder.name, "dim": encoder.dim,
+                    "checkpoint": cfg.encoder.checkpoint, "options": encoder_options,
+                    "description": utils.describe_encoder(cfg, encoder)},
+        "dataset": {"spec": dataclasses.asdict(dataset_spec(cfg)),
+                    "held_out_fraction": cfg.dataset.held_out_fraction,
+                    "train": train.describe(), "held_out": held_out.describe(),
+                    "failure_noise": dataset.describe()["failed_expert"]["noise"],
+                    "collection_seconds": dataset.collection_seconds,
+                    "source": dataset.source},
+        "finetuning": {"stage": cfg.finetune.stage, "updates": cfg.finetune.updates,
+                       **{key: cfg.reward[key] for key in (
+                           "batch_size", "lr", "delta", "l2_margin", "gap", "same_position",
+                           "label_window", "k", "alpha", "projection", "window",
+                           "certainty_bandwidth", "certainty_prior")}},
+        "run": {"command": command, "machine": machine_description(),
+                "seconds": time.perf_counter() - start, "dataset_seconds": dataset_seconds,
+                "scoring_seconds": time.perf_counter() - start - dataset_seconds},
+        "rows": rows,
+    }
+    output.mkdir(parents=True, exist_ok=True)
+    report.write_json(output / "results.json", result)
+    (output / "results.md").write_text(report.results_markdown(result))
+    return result
+
+
+# --------------------------------------------------------------------------- all tasks
+def evaluate(cfg: DictConfig, command: str | None = None) -> list[dict]:
+    """Score every configured variant on every configured task; returns one result per task.
+
+    ``command`` is recorded in the results (default: the recipe's name, for configs built in
+    code).
+    """
+    validate_config(cfg)
+    if cfg.threads is not None:
+        torch.set_num_threads(cfg.threads)
+    command = command or "python recipes/evaluate_rewards.py (config composed in code)"
+    encoder = utils.make_encoder(cfg)
+    print(utils.describe_encoder(cfg, encoder), flush=True)
+    results = []
+    for task in config_tasks(cfg):
+        results.append(evaluate_task(task_config(cfg, task), encoder, command))
+        print(f"{task}: {results[-1]['run']['seconds']:.0f} s -> "
+              f"{Path(cfg.output_dir) / task / 'results.md'}", flush=True)
+    if len(results) > 1:
+        output = Path(cfg.output_dir)
+        report.write_json(output / "summary.json", {"tasks": results})
+        (output / "summary.md").write_text(report.summary_markdown(results))
+        print(f"summary -> {output / 'summary.md'}", flush=True)
+    return results
+
+
+@hydra.main(config_path=".", config_name="evaluate_rewards", version_base=None)
+def main(cfg: DictConfig) -> None:
+    overrides = HydraConfig.get().overrides.task
+    evaluate(cfg, " ".join(["python recipes/evaluate_rewards.py", *overrides]))
+
+
+if __name__ == "__main__":
+    main()
