@@ -378,6 +378,26 @@ def test_reward_curves_use_the_saved_heads(real_run):
         reward_curves(real_run, negative=0)
 
 
+def test_reward_curves_give_a_sequence_reward_its_window():
+    """d_sequence reads the last K embeddings: the curve's value at state t is the reward of the
+    window s_{t-K+1} .. s_t padded with s_0 before the episode start, as the env gives it."""
+    from temporal_torchrl.experiments.reward_curves import episode_rewards
+
+    torch.manual_seed(0)
+    dim, length = 6, 4
+    reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional="furl",
+                            directional="d_sequence", window_length=length, k=2)
+    s = torch.randn(9, dim)
+    positional, directional = episode_rewards(reward, s)
+    with torch.no_grad():
+        for t in range(s.shape[0]):
+            window = torch.stack([s[max(t - length + 1 + j, 0)] for j in range(length)])
+            expected = reward.directional_reward(s[t], s[max(t - 2, 0)], s[0], window=window)
+            assert directional[t] == pytest.approx(float(expected), abs=1e-6)
+            assert positional[t] == pytest.approx(float(reward.positional_reward(
+                s[t], s[0], s[max(t - 2, 0)])), abs=1e-6)
+
+
 def test_report_cli_end_to_end(tmp_path, real_run):
     sweep = tmp_path / "sweep"
     logged = {"sac/loss_qvalue": [(1000, 2.0), (2000, 1.5), (3000, 1.0)]}

@@ -85,16 +85,24 @@ def load_reward(run_dir: str | Path) -> tuple[TemporalReward, dict]:
 def episode_rewards(reward: TemporalReward,
                     embeddings: torch.Tensor) -> tuple[np.ndarray | None, np.ndarray | None]:
     """r_P and r_D (None for an absent part) at every state of one episode's embeddings
-    ``[T + 1, D]`` (state 0 included), each with s_0 and s_{t-k} as the env gives them."""
+    ``[T + 1, D]`` (state 0 included), through the reward's own forward as the env computes
+    them: s_0, s_{t-k} and (for a sequence reward) the window of the last K embeddings, never
+    before state 0; r_D with its certainty scaling when the reward has one."""
     embeddings = embeddings.float()
     steps = torch.arange(embeddings.shape[0])
     previous = embeddings[torch.clamp(steps - reward.k, min=0)]
     initial = embeddings[:1].expand_as(embeddings)
+    window = None
+    if reward.window_length is not None:
+        offsets = torch.arange(reward.window_length - 1, -1, -1)
+        window = embeddings[torch.clamp(steps.unsqueeze(-1) - offsets, min=0)]
+    success = torch.zeros(embeddings.shape[0], 1, dtype=torch.bool)
     with torch.no_grad():
-        positional = (reward.positional_reward(embeddings, initial, previous).numpy()
-                      if reward.positional is not None else None)
-        directional = (reward.directional_reward(embeddings, previous, initial).numpy()
-                       if reward.directional is not None else None)
+        parts = reward(embeddings, initial, previous, success, window=window)
+    positional = (parts["positional_reward"].squeeze(-1).numpy()
+                  if reward.positional is not None else None)
+    directional = (parts["directional_reward"].squeeze(-1).numpy()
+                   if reward.directional is not None else None)
     return positional, directional
 
 
