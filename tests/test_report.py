@@ -324,6 +324,11 @@ def test_wandb_offline_run_is_read(tmp_path, monkeypatch):
         logger.log_scalar("sac/loss_qvalue", step / 7, step=1000 * step)
         logger.log_scalar("train/success", float(step % 2), step=500 * step)
     logger.experiment.finish()
+    # wandb's service process writes the file; teardown waits for it (finish alone may return
+    # before the last records are flushed on a loaded machine).
+    import wandb
+
+    wandb.teardown()
     assert sum(path.stat().st_size for path in tmp_path.rglob("*.wandb")) > 32 * 1024
     scalars = logged_scalars(tmp_path)
     assert scalars["sac/loss_qvalue"].steps.tolist() == [1000.0 * step for step in range(300)]
