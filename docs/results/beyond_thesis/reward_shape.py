@@ -1,0 +1,163 @@
+"""The shape of the finetuned directional reward: D3 against d_certainty and D3 scaled by the
+certainty (``reward.certainty_scaling``), the thesis's section 6.4 question ("is the indicator
+shape of D3 desirable?"), measured offline.
+
+For each task, on the reward-quality benchmark's datasets, split and finetuning (1,000 updates by
+default, the benchmark's ``finetune.*`` and ``reward.*`` settings), the reward the agent would get
+at every held-out step (successful episodes up to their first success, failed episodes whole):
+
+- saturated: the fraction of steps with |r_D| > 0.9 (D3 behaves like an indicator: near +-1);
+- mean r_D on successful and on failed steps;
+- direction accuracy and AUROC as the benchmark computes them, but of the reward the agent sees:
+  with the certainty scaling that is |t(s_t, Δs_t)| r_D3, which the benchmark's own scoring (it
+  scores ``directional_reward``, the heads' output) does not include.
+
+    OMP_NUM_THREADS=1 python docs/results/beyond_thesis/reward_shape.py \
+        env.task=[drawer-open,door-open,window-open,window-close,push,button-press-topdown]
+
+Writes ``docs/results/beyond_thesis/reward_shape.md``; overrides are
+``recipes/evaluate_rewards.py``'s.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+from torch import Tensor
+
+RECIPES = Path(__file__).resolve().parents[3] / "recipes"
+sys.path.insert(0, str(RECIPES))
+
+import evaluate_rewards  # noqa: E402
+import utils  # noqa: E402
+
+from temporal_torchrl.data import goal_image_embedding  # noqa: E402
+from temporal_torchrl.envs import get_task  # noqa: E402
+from temporal_torchrl.evaluation import (  # noqa: E402
+    auroc,
+    direction_accuracy,
+    episode_embeddings,
+    finetune_reward,
+    load_or_collect,
+    make_finetuning_buffer,
+    split_by_episode,
+    state_rewards,
+    success_length,
+    variant_reward,
+)
+from temporal_torchrl.rewards import TemporalReward  # noqa: E402
+
+#: (label, variant, certainty scaling)
+CONFIGURATIONS = (("d3", "d3", False), ("d_certainty", "d_certainty", False),
+                  ("d3 x certainty", "d3", True))
+COLUMNS = ("saturated", "mean r_D successful", "mean r_D failed", "direction accuracy", "AUROC")
+
+
+@torch.no_grad()
+def agent_rewards(reward: TemporalReward, states: Tensor) -> Tensor:
+    """The r_D the agent sees at every state of one episode (s_0 first), scaled by |t| with
+    ``certainty_scaling``, as ``TemporalReward.forward`` computes it."""
+    rewards = state_rewards(reward, states)
+    if reward.certainty is not None:
+        previous = states[(torch.arange(states.shape[0]) - reward.k).clamp_min(0)]
+        rewards = rewards * reward.certainty(states, states - previous).abs()
+    return rewards
+
+
+def shape(reward: TemporalReward, successful, failed) -> dict[str, float]:
+    positive, negative, forward, backward = [], [], [], []
+    for episode in successful:
+        length = success_length(episode)
+        states = episode_embeddings(episode)[:length + 1]
+        rewards = agent_rewards(reward, states)
+        positive.append(rewards[1:])
+        forward.append(rewards[1:length])
+        backward.append(agent_rewards(reward, states.flip(0)).flip(0)[1:length])
+    for episode in failed:
+        negative.append(agent_rewards(reward, episode_embeddings(episode))[1:])
+    positive, negative = torch.cat(positive), torch.cat(negative)
+    every = torch.cat([positive, negative])
+    return {"saturated": float((every.abs() > 0.9).float().mean()),
+            "mean r_D successful": float(positive.mean()),
+            "mean r_D failed": float(negative.mean()),
+            "direction accuracy": direction_accuracy(torch.cat(forward), torch.cat(backward)),
+            "AUROC": auroc(positive, negative)}
+
+
+def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
+    options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
+    dataset = load_or_collect(evaluate_rewards.dataset_spec(cfg), encoder,
+                              cfg.dataset.cache_dir, encoder_description={"options": options})
+    train_indices, held_out_indices = split_by_episode(
+        dataset.kinds, cfg.dataset.held_out_fraction, cfg.env.seed)
+    train, held_out = dataset.subset(train_indices), dataset.subset(held_out_indices)
+    successful = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if ok]
+    failed = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if not ok]
+    goal_image = goal_image_embedding(next(
+        e for e, ok in zip(train.episodes, train.successful, strict=True) if ok))
+    texts = encoder.embed_text([get_task(cfg.env.task).goal_prompt,
+                                utils.baseline_text(cfg)]).cpu()
+    buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
+                                    history=cfg.reward.k, label_window=cfg.reward.label_window)
+    shapes = {}
+    for label, variant, scaling in CONFIGURATIONS:
+        torch.manual_seed(cfg.env.seed)
+        reward = variant_reward(variant, encoder.dim, texts[0], texts[1], k=cfg.reward.k,
+                                certainty_bandwidth=cfg.reward.certainty_bandwidth,
+                                certainty_prior=cfg.reward.certainty_prior,
+                                certainty_scaling=scaling)
+        finetune_reward(reward, buffer, goal_image, updates=cfg.finetune.updates,
+                        batch_size=cfg.reward.batch_size, gap=cfg.reward.gap, lr=cfg.reward.lr)
+        shapes[label] = shape(reward, successful, failed)
+        print(f"  {cfg.env.task} {label}: " + ", ".join(
+            f"{key} {value:.2f}" for key, value in shapes[label].items()), flush=True)
+    return shapes
+
+
+def main(overrides: list[str]) -> None:
+    torch.set_num_threads(1)
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        cfg = compose("evaluate_rewards", overrides=overrides)
+    evaluate_rewards.validate_config(cfg)
+    start = time.perf_counter()
+    encoder = utils.make_encoder(cfg)
+    tasks = evaluate_rewards.config_tasks(cfg)
+    per_task = {task: task_shapes(evaluate_rewards.task_config(cfg, task), encoder)
+                for task in tasks}
+    lines = ["# The shape of the finetuned directional reward: D3, d_certainty, D3 x certainty",
+             "", f"Held-out steps of the reward-quality benchmark ({encoder.name} encoder, "
+             f"{cfg.finetune.updates} updates, stage {cfg.finetune.stage}); the reward the agent "
+             "sees (with the certainty scaling: |t| r_D3). 'saturated': fraction of steps with "
+             "|r_D| > 0.9. Mean over the tasks, then per task.", "",
+             "| reward | " + " | ".join(COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]
+    for label, _, _ in CONFIGURATIONS:
+        means = [sum(per_task[task][label][column] for task in tasks) / len(tasks)
+                 for column in COLUMNS]
+        lines.append(f"| {label} | " + " | ".join(f"{value:+.2f}" if "mean" in column
+                                                  else f"{value:.2f}"
+                                                  for column, value in zip(COLUMNS, means,
+                                                                           strict=True)) + " |")
+    for task in tasks:
+        lines += ["", f"**{task}**", "", "| reward | " + " | ".join(COLUMNS) + " |",
+                  "|---|" + "---|" * len(COLUMNS)]
+        for label, _, _ in CONFIGURATIONS:
+            values = per_task[task][label]
+            lines.append(f"| {label} | " + " | ".join(
+                f"{values[column]:+.2f}" if "mean" in column else f"{values[column]:.2f}"
+                for column in COLUMNS) + " |")
+    lines += ["", f"- command: `python docs/results/beyond_thesis/reward_shape.py "
+              f"{' '.join(overrides)}`",
+              f"- machine: {evaluate_rewards.machine_description()}; wall time "
+              f"{time.perf_counter() - start:.0f} s"]
+    output = Path(__file__).with_name("reward_shape.md")
+    output.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
