@@ -88,7 +88,7 @@ _CHECKS = (
      "an integer >= 1, or null"),
     ("reward.window", lambda v: _is_integer(v, 2), "an integer >= 2"),
     ("reward.certainty_bandwidth", lambda v: _is_number(v) and v > 0, "a number > 0"),
-    ("reward.certainty_prior", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
+    ("reward.certainty_prior", lambda v: _is_number(v) and v > 0, "a number > 0"),
     ("dataset.expert_episodes", lambda v: _is_integer(v, 2), "an integer >= 2"),
     ("dataset.random_episodes", lambda v: _is_integer(v, 0), "an integer >= 0"),
     ("dataset.failed_expert_episodes", lambda v: _is_integer(v, 0), "an integer >= 0"),
