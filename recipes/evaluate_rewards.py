@@ -38,6 +38,7 @@ import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, ListConfig, OmegaConf
+from tensordict import TensorDict
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -48,6 +49,7 @@ from temporal_torchrl.encoders import ENCODERS, Encoder  # noqa: E402
 from temporal_torchrl.envs import TASKS, get_task  # noqa: E402
 from temporal_torchrl.evaluation import (  # noqa: E402
     DatasetSpec,
+    RewardDataset,
     finetune_reward,
     load_or_collect,
     make_finetuning_buffer,
@@ -217,20 +219,50 @@ def dataset_spec(cfg: DictConfig) -> DatasetSpec:
 
 
 # --------------------------------------------------------------------------- one task
+@dataclasses.dataclass(frozen=True)
+class TaskData:
+    """One task's dataset split by episode, and what every scorer reads from it."""
+
+    dataset: RewardDataset
+    train: RewardDataset
+    held_out: RewardDataset
+    successful: list[TensorDict]  # held-out successful episodes
+    failed: list[TensorDict]  # held-out failed episodes
+    goal_image: torch.Tensor  # s_g, from the first training expert
+    goal_embedding: torch.Tensor
+    baseline_embedding: torch.Tensor
+
+
+def prepare_task(cfg: DictConfig, encoder: Encoder) -> TaskData:
+    """Collect (or load from the cache) the task's dataset and split it by episode; s_g comes
+    from the first training expert, as the training recipe takes it from its first expert."""
+    encoder_options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
+    dataset = load_or_collect(dataset_spec(cfg), encoder, cfg.dataset.cache_dir,
+                              encoder_description={"options": encoder_options})
+    train_indices, held_out_indices = split_by_episode(
+        dataset.kinds, cfg.dataset.held_out_fraction, cfg.env.seed)
+    train, held_out = dataset.subset(train_indices), dataset.subset(held_out_indices)
+    outcomes = list(zip(held_out.episodes, held_out.successful, strict=True))
+    goal_image = goal_image_embedding(next(
+        episode for episode, ok in zip(train.episodes, train.successful, strict=True) if ok))
+    texts = encoder.embed_text([get_task(cfg.env.task).goal_prompt,
+                                utils.baseline_text(cfg)]).cpu()
+    return TaskData(dataset, train, held_out,
+                    successful=[episode for episode, ok in outcomes if ok],
+                    failed=[episode for episode, ok in outcomes if not ok],
+                    goal_image=goal_image, goal_embedding=texts[0], baseline_embedding=texts[1])
+
+
 def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
     """Collect or load the task's dataset, then score every variant; returns the result dict
     (:mod:`temporal_torchrl.evaluation.report`) and writes it under ``output_dir/<task>``."""
     start = time.perf_counter()
     task = get_task(cfg.env.task)
-    encoder_options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
-    dataset = load_or_collect(dataset_spec(cfg), encoder, cfg.dataset.cache_dir,
-                              encoder_description={"options": encoder_options})
+    data = prepare_task(cfg, encoder)
+    dataset, train, held_out = data.dataset, data.train, data.held_out
+    successful, failed, goal_image = data.successful, data.failed, data.goal_image
+    goal_embedding, baseline_embedding = data.goal_embedding, data.baseline_embedding
     dataset_seconds = time.perf_counter() - start
-    train_indices, held_out_indices = split_by_episode(
-        dataset.kinds, cfg.dataset.held_out_fraction, cfg.env.seed)
-    train, held_out = dataset.subset(train_indices), dataset.subset(held_out_indices)
-    successful = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if ok]
-    failed = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if not ok]
     # The figure's failed episode: a failed expert when there is one (it approaches the goal
     # for a while, like the thesis's Figure 5.12 negative), else any failed episode.
     failed_kinds = [kind for kind, ok in zip(held_out.kinds, held_out.successful, strict=True)
@@ -239,11 +271,6 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
         if "failed_expert" in failed_kinds else failed[0]
     figure_successful = successful[0]
 
-    # s_g from the first training expert, as the training recipe takes it from its first expert.
-    goal_image = goal_image_embedding(next(
-        e for e, ok in zip(train.episodes, train.successful, strict=True) if ok))
-    baseline = utils.baseline_text(cfg)
-    goal_embedding, baseline_embedding = encoder.embed_text([task.goal_prompt, baseline]).cpu()
     # One buffer per window length (None for every reward that reads no window).
     buffers: dict[int | None, EpisodeReplayBuffer] = {}
 
@@ -300,9 +327,10 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
             if row["variant"] == variant) + f" ({rows[-1]['seconds']:.0f} s)", flush=True)
 
     result = {
-        "task": task.name, "goal": task.goal_prompt, "baseline": baseline,
+        "task": task.name, "goal": task.goal_prompt, "baseline": utils.baseline_text(cfg),
         "encoder": {"name": encoder.name, "dim": encoder.dim,
-                    "checkpoint": cfg.encoder.checkpoint, "options": encoder_options,
+                    "checkpoint": cfg.encoder.checkpoint,
+                    "options": OmegaConf.to_container(cfg.encoder.options, resolve=True) or {},
                     "description": utils.describe_encoder(cfg, encoder)},
         "dataset": {"spec": dataclasses.asdict(dataset_spec(cfg)),
                     "held_out_fraction": cfg.dataset.held_out_fraction,

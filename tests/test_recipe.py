@@ -6,14 +6,13 @@ import sys
 from pathlib import Path
 
 import pytest
+import sac_temporal
 import torch
+import utils
 from hydra import compose, initialize_config_dir
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
-sys.path.insert(0, str(RECIPES))
 
-import sac_temporal  # noqa: E402
-import utils  # noqa: E402
 
 # Tiny but complete: 20-step episodes, updates from step 11 on, small networks and batches.
 QUICK = [

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import report
+import sac_temporal
 import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
@@ -37,10 +39,7 @@ from temporal_torchrl.experiments.tables import grouping_markdown, table_markdow
 from temporal_torchrl.rewards import TemporalReward
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
-sys.path.insert(0, str(RECIPES))
 
-import report  # noqa: E402
-import sac_temporal  # noqa: E402
 
 # seed 0: 150 failures then 150 successes -> RAS(300; 150) = 100 %, TTFS 151, TT50S 200.
 SEED0 = [False] * 150 + [True] * 150

@@ -1,10 +1,12 @@
 """One reward path: the env, the replay relabelling, SAC's batches and the finetuning losses all
 see the same rewards for the same stored embeddings, checked value by value."""
 
+import sac_temporal
 import torch
 import torch.nn.functional as F
+import utils
 from tensordict import TensorDict
-from test_recipe import config, sac_temporal, utils  # test_recipe puts recipes/ on sys.path
+from test_recipe import config
 
 from temporal_torchrl.data import EpisodeReplayBuffer
 from temporal_torchrl.objectives import PositionalRankingLoss

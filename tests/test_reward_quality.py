@@ -2,9 +2,9 @@
 the split by episode, the dataset cache and a tiny end-to-end run of recipes/evaluate_rewards.py."""
 
 import json
-import sys
 from pathlib import Path
 
+import evaluate_rewards
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
@@ -28,9 +28,7 @@ from temporal_torchrl.evaluation import dataset as dataset_module
 from temporal_torchrl.rewards import register_reward, unregister_reward
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
-sys.path.insert(0, str(RECIPES))
 
-import evaluate_rewards  # noqa: E402
 
 
 @pytest.fixture(autouse=True)

@@ -7,9 +7,10 @@ import subprocess
 import sys
 
 import pytest
+import utils
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
-from test_recipe import QUICK, RECIPES, utils  # test_recipe puts recipes/ on sys.path
+from test_recipe import QUICK, RECIPES
 
 STUDIES = {  # study: (presets, protocol, runs)
     "table_5_2": ("furl,p2,p3,d3", "stage1", 96),

@@ -26,7 +26,6 @@ from pathlib import Path
 
 import torch
 from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
 
 RECIPES = Path(__file__).resolve().parents[3] / "recipes"
 sys.path.insert(0, str(RECIPES))
@@ -34,11 +33,8 @@ sys.path.insert(0, str(RECIPES))
 import evaluate_rewards  # noqa: E402
 import utils  # noqa: E402
 
-from temporal_torchrl.data import goal_image_embedding  # noqa: E402
 from temporal_torchrl.evaluation import (  # noqa: E402
-    load_or_collect,
     make_finetuning_buffer,
-    split_by_episode,
 )
 from temporal_torchrl.rewards import direction_certainty, reference_scales  # noqa: E402
 
@@ -50,14 +46,8 @@ KINDS = ("observed positive", "observed negative", "opposite", "towards goal", "
 
 def task_targets(cfg, encoder) -> dict[tuple[float, float], dict[str, float]]:
     """Mean target per query kind, per (beta, c), over BATCHES batches of one task."""
-    options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
-    dataset = load_or_collect(evaluate_rewards.dataset_spec(cfg), encoder,
-                              cfg.dataset.cache_dir, encoder_description={"options": options})
-    train_indices, _ = split_by_episode(dataset.kinds, cfg.dataset.held_out_fraction,
-                                        cfg.env.seed)
-    train = dataset.subset(train_indices)
-    goal = goal_image_embedding(next(
-        e for e, ok in zip(train.episodes, train.successful, strict=True) if ok))
+    data = evaluate_rewards.prepare_task(cfg, encoder)
+    train, goal = data.train, data.goal_image
     buffer = make_finetuning_buffer(train.episodes, history=cfg.reward.k,
                                     label_window=cfg.reward.label_window)
     generator = torch.Generator().manual_seed(cfg.env.seed)

@@ -27,7 +27,6 @@ from pathlib import Path
 
 import torch
 from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
 from torch import Tensor
 
 RECIPES = Path(__file__).resolve().parents[3] / "recipes"
@@ -36,16 +35,12 @@ sys.path.insert(0, str(RECIPES))
 import evaluate_rewards  # noqa: E402
 import utils  # noqa: E402
 
-from temporal_torchrl.data import goal_image_embedding  # noqa: E402
-from temporal_torchrl.envs import get_task  # noqa: E402
 from temporal_torchrl.evaluation import (  # noqa: E402
     auroc,
     direction_accuracy,
     episode_embeddings,
     finetune_reward,
-    load_or_collect,
     make_finetuning_buffer,
-    split_by_episode,
     state_rewards,
     success_length,
     variant_reward,
@@ -90,18 +85,9 @@ def shape(reward: TemporalReward, successful, failed) -> dict[str, float]:
 
 
 def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
-    options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
-    dataset = load_or_collect(evaluate_rewards.dataset_spec(cfg), encoder,
-                              cfg.dataset.cache_dir, encoder_description={"options": options})
-    train_indices, held_out_indices = split_by_episode(
-        dataset.kinds, cfg.dataset.held_out_fraction, cfg.env.seed)
-    train, held_out = dataset.subset(train_indices), dataset.subset(held_out_indices)
-    successful = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if ok]
-    failed = [e for e, ok in zip(held_out.episodes, held_out.successful, strict=True) if not ok]
-    goal_image = goal_image_embedding(next(
-        e for e, ok in zip(train.episodes, train.successful, strict=True) if ok))
-    texts = encoder.embed_text([get_task(cfg.env.task).goal_prompt,
-                                utils.baseline_text(cfg)]).cpu()
+    data = evaluate_rewards.prepare_task(cfg, encoder)
+    train, successful, failed = data.train, data.successful, data.failed
+    goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
                                     history=cfg.reward.k, label_window=cfg.reward.label_window)
     shapes = {}
