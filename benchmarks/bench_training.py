@@ -8,8 +8,9 @@ Rows:
 2. whole loop with rendering + a random-weight LIV encoder (256x256 frames) vs the same env
    pipeline stepping without any training, env steps/s;
 3. sampling 256 sub-trajectories at 500,000 transitions (D = 1024): EpisodeReplayBuffer.sample
-   (s_{t+1}, s_0, s_{t+1-k} by index) vs TorchRL's SliceSampler(slice_len=2) on a
-   LazyTensorStorage with the same float16 embeddings;
+   (a TorchRL ReplayBuffer: s_{t+1}, s_0, s_{t+1-k} by index, laid out for SAC by its
+   transform) vs TorchRL's SliceSampler(slice_len=2) on a LazyTensorStorage with the same
+   float16 embeddings; and a finetuning batch (stage 2: 256 negatives, positives, pairs);
 4. replay memory at 500,000 transitions vs storing s_t and s_{t+1} as float32 (the naive layout).
 
 Runs on one torch thread (the machine may be shared). ``--quick`` shortens every timing.
@@ -35,7 +36,8 @@ sys.path.insert(0, str(RECIPES))
 import sac_temporal  # noqa: E402
 import utils  # noqa: E402
 
-from temporal_torchrl.data import EpisodeReplayBuffer  # noqa: E402
+from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows  # noqa: E402
+from temporal_torchrl.envs import make_env  # noqa: E402
 
 
 def recipe_config(output_dir: Path, *overrides: str):
@@ -48,7 +50,7 @@ def recipe_config(output_dir: Path, *overrides: str):
 
 def plain_sac_steps_per_second(cfg, episodes: int) -> float:
     """The reference: TorchRL env.step + per-step buffer extend + SACLoss update, no VLM."""
-    env = utils.make_env(cfg.env.task, cfg.env.seed, max_episode_steps=cfg.env.max_episode_steps)
+    env = make_env(cfg.env.task, cfg.env.seed, max_episode_steps=cfg.env.max_episode_steps)
     actor, qvalue = utils.make_sac_agent(cfg, env)
     loss, updater, optimizer = utils.make_sac_loss(cfg, actor, qvalue, 4)
     buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(episodes * 1000),
@@ -79,7 +81,7 @@ def plain_sac_steps_per_second(cfg, episodes: int) -> float:
 def pipeline_steps_per_second(cfg, steps: int) -> float:
     """Reference for the rendering row: the render -> embed -> reward env, no training."""
     encoder = utils.make_encoder(cfg)
-    env = utils.make_environment(cfg, encoder, utils.make_temporal_reward(cfg, encoder))
+    env = utils.make_environment(cfg, encoder, utils.make_reward(cfg, encoder))
     env.rollout(2, break_when_any_done=False)
     start = time.perf_counter()
     env.rollout(steps, break_when_any_done=False)
@@ -89,7 +91,8 @@ def pipeline_steps_per_second(cfg, steps: int) -> float:
 def filled_buffers(transitions: int, dim: int = 1024, episode_length: int = 500):
     """The project's buffer and a TorchRL SliceSampler buffer, both with ``transitions``."""
     episodes = transitions // episode_length
-    ours = EpisodeReplayBuffer(capacity=episodes * (episode_length + 1), history=5)
+    ours = EpisodeReplayBuffer(capacity=episodes * (episode_length + 1), history=5,
+                               permanent_episodes=1)
     reference = TensorDictReplayBuffer(
         storage=LazyTensorStorage(transitions),
         sampler=SliceSampler(slice_len=2, traj_key="episode", strict_length=True,
@@ -100,13 +103,15 @@ def filled_buffers(transitions: int, dim: int = 1024, episode_length: int = 500)
         embedding = torch.randn(episode_length + 1, dim)
         observation = torch.randn(episode_length + 1, 39)
         success = torch.zeros(episode_length, 1, dtype=torch.bool)
+        if index == 0:  # one successful episode: the finetuning batch has every group
+            success[400:] = True
         episode = TensorDict({
             "observation": observation[:-1], "embedding": embedding[:-1],
             "action": torch.rand(episode_length, 4), "success": success,
             "next": {"observation": observation[1:], "embedding": embedding[1:],
                      "success": success, "terminated": torch.zeros_like(done), "done": done},
         }, [episode_length])
-        ours.extend(episode)
+        ours.extend(episode_rows(episode))
         flat = TensorDict({
             "observation": observation[:-1], "action": episode["action"],
             "episode": torch.full((episode_length,), index),
@@ -170,9 +175,9 @@ def main() -> None:
                  "project": 1000 * ours_seconds, "reference": 1000 * reference_seconds,
                  "reference is": "SliceSampler(slice_len=2), float16 embeddings",
                  "ratio": ours_seconds / reference_seconds})
-    finetuning_seconds = seconds_per_call(lambda: ours.sample_finetuning(256),
+    finetuning_seconds = seconds_per_call(lambda: ours.finetuning.sample(256),
                                           min_seconds=minimum)
-    rows.append({"measure": "finetuning batch (256 negatives) at 500k (ms)",
+    rows.append({"measure": "finetuning batch (256 negatives, positives, pairs) at 500k (ms)",
                  "project": 1000 * finetuning_seconds, "reference": 1000 * reference_seconds,
                  "reference is": "SliceSampler(slice_len=2), float16 embeddings",
                  "ratio": finetuning_seconds / reference_seconds})

@@ -29,25 +29,21 @@ from __future__ import annotations
 import dataclasses
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import hydra
 import torch
+import utils
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from tensordict import TensorDict
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import utils  # noqa: E402
-
-from temporal_torchrl.data import EpisodeReplayBuffer, goal_image_embedding  # noqa: E402
-from temporal_torchrl.encoders import ENCODERS, Encoder  # noqa: E402
-from temporal_torchrl.envs import TASKS, get_task  # noqa: E402
-from temporal_torchrl.evaluation import (  # noqa: E402
+from temporal_torchrl.data import EpisodeReplayBuffer, goal_image_embedding
+from temporal_torchrl.encoders import ENCODERS, Encoder
+from temporal_torchrl.envs import TASKS, baseline_text, get_task
+from temporal_torchrl.evaluation import (
     DatasetSpec,
     RewardDataset,
     finetune_reward,
@@ -60,7 +56,8 @@ from temporal_torchrl.evaluation import (  # noqa: E402
     success_length,
     variant_reward,
 )
-from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL  # noqa: E402
+from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
+from temporal_torchrl.training.config import import_reward_modules
 
 _GROUPS = ("env", "encoder", "reward", "dataset", "finetune")
 
@@ -143,7 +140,7 @@ def validate_config(cfg: DictConfig) -> None:
         if not isinstance(cfg.get(group), DictConfig):
             raise _bad(group, cfg.get(group), f"a group of settings (set its keys one by one, "
                        f"e.g. {group}.<key>=<value>)")
-    utils.import_reward_modules(cfg.reward.modules)
+    import_reward_modules(cfg.reward.modules)
     tasks = config_tasks(cfg)
     unknown = [task for task in tasks if task not in TASKS]
     if not tasks or unknown:
@@ -246,7 +243,7 @@ def prepare_task(cfg: DictConfig, encoder: Encoder) -> TaskData:
     goal_image = goal_image_embedding(next(
         episode for episode, ok in zip(train.episodes, train.successful, strict=True) if ok))
     texts = encoder.embed_text([get_task(cfg.env.task).goal_prompt,
-                                utils.baseline_text(cfg)]).cpu()
+                                baseline_text(cfg.env.task, cfg.reward.baseline)]).cpu()
     return TaskData(dataset, train, held_out,
                     successful=[episode for episode, ok in outcomes if ok],
                     failed=[episode for episode, ok in outcomes if not ok],
@@ -294,11 +291,12 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
                 if reward.window_length not in buffers:
                     buffers[reward.window_length] = make_finetuning_buffer(
                         train.episodes, stage=cfg.finetune.stage, history=cfg.reward.k,
-                        label_window=cfg.reward.label_window, window_length=reward.window_length)
+                        label_window=cfg.reward.label_window, window_length=reward.window_length,
+                        gap=cfg.reward.gap)
                 final_losses = finetune_reward(
                     reward, buffers[reward.window_length], goal_image,
                     updates=cfg.finetune.updates,
-                    batch_size=cfg.reward.batch_size, gap=cfg.reward.gap, lr=cfg.reward.lr,
+                    batch_size=cfg.reward.batch_size, lr=cfg.reward.lr,
                     delta=cfg.reward.delta, l2_margin=cfg.reward.l2_margin,
                     same_position=cfg.reward.same_position)
             scores = score_reward(reward, successful, failed)
@@ -327,7 +325,8 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
             if row["variant"] == variant) + f" ({rows[-1]['seconds']:.0f} s)", flush=True)
 
     result = {
-        "task": task.name, "goal": task.goal_prompt, "baseline": utils.baseline_text(cfg),
+        "task": task.name, "goal": task.goal_prompt,
+        "baseline": baseline_text(cfg.env.task, cfg.reward.baseline),
         "encoder": {"name": encoder.name, "dim": encoder.dim,
                     "checkpoint": cfg.encoder.checkpoint,
                     "options": OmegaConf.to_container(cfg.encoder.options, resolve=True) or {},

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import sys
 from pathlib import Path
 
 from temporal_torchrl.experiments import (
@@ -98,10 +97,10 @@ def import_reward_modules(run_dir: Path) -> None:
     """Import the run's ``reward.modules`` (its own registered rewards), as the recipe does."""
     modules = json.loads((run_dir / "config.json").read_text())["reward"].get("modules") or []
     if modules:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        import utils  # the recipe's helpers (heavy imports: only for runs that need them)
+        # The training package (heavy imports): only for runs that need it.
+        from temporal_torchrl.training.config import import_reward_modules as load_modules
 
-        utils.import_reward_modules(modules)
+        load_modules(modules)
 
 
 def metric_file(key: str) -> str:

@@ -1,13 +1,10 @@
-"""Shared test settings: headless rendering, a deterministic torch, and the recipes (the
-scripts in recipes/) importable as modules by every test file."""
+"""Shared test settings: headless rendering and a deterministic torch (the recipes are
+importable through pytest's ``pythonpath``, see pyproject.toml)."""
 
 import os
-import sys
-from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("WANDB_MODE", "offline")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "recipes"))
 
 import pytest  # noqa: E402
 import torch  # noqa: E402

@@ -5,7 +5,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from temporal_torchrl.data import EpisodeReplayBuffer
+from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.objectives import (
     CertaintyLoss,
     DirectionalLoss,
@@ -126,9 +126,9 @@ def test_finetuning_batches_never_hold_the_reset_frame():
     from test_replay import make_episode
 
     buffer = EpisodeReplayBuffer(capacity=300, history=2)
-    buffer.extend(make_episode(0, 20))
-    buffer.extend(make_episode(1, 20, successes=(15,)))
-    batch = buffer.sample_finetuning(500, gap=10)
+    buffer.extend(episode_rows(make_episode(0, 20)))
+    buffer.extend(episode_rows(make_episode(1, 20, successes=(15,))))
+    batch = buffer.finetuning.sample(500)
     for key in ("negative", "positive", ("positive_pair", "earlier")):
         assert (batch[key]["step"] >= 1).all(), key
     assert set(batch["negative", "step"].tolist()) == set(range(1, 21))
@@ -168,11 +168,11 @@ def test_stage_switch_follows_the_first_positive_episode():
                             directional="d3")
     positional = PositionalRankingLoss(reward, torch.randn(4))
     directional = DirectionalLoss(reward, torch.randn(4))
-    buffer.extend(make_episode(0, 20))
-    batch = buffer.sample_finetuning(16, gap=10)
+    buffer.extend(episode_rows(make_episode(0, 20)))
+    batch = buffer.finetuning.sample(16)
     assert int(positional(batch)["stage"]) == 1 and int(directional(batch)["stage"]) == 1
-    buffer.extend(make_episode(1, 20, successes=(15,)))
-    batch = buffer.sample_finetuning(16, gap=10)
+    buffer.extend(episode_rows(make_episode(1, 20, successes=(15,))))
+    batch = buffer.finetuning.sample(16)
     out = positional(batch)
     assert int(out["stage"]) == 2 and {"loss_pos_neg", "loss_pos_pos"} <= set(out.keys())
     assert int(directional(batch)["stage"]) == 2

@@ -11,6 +11,9 @@ import torch
 import utils
 from hydra import compose, initialize_config_dir
 
+from temporal_torchrl.training import RunDirectory
+from temporal_torchrl.training.config import default_run_dir, override_keys, resumed_config
+
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 
 
@@ -85,14 +88,14 @@ def test_stage_two_preloads_positive_experts(tmp_path):
     run_dir = tmp_path / "run"
     assert [row["stage"] for row in episode_rows(run_dir)] == ["2", "2"]
     assert len(list((run_dir / "replay").iterdir())) == 4  # 2 experts + 2 episodes
-    state = utils.load_checkpoint(run_dir)
+    state = RunDirectory(run_dir).load_checkpoint()
     assert state["inserted"] == 4 and state["episode"] == 2
 
 
 @pytest.mark.parametrize(("steps_after_success", "length"), [("5", None), ("null", 500)])
 def test_preloaded_experts_are_cut_or_whole(tmp_path, steps_after_success, length):
     cfg = config(tmp_path, f"train.expert_steps_after_success={steps_after_success}")
-    episode, = utils.collect_successful_experts(cfg, encoder=None, count=1)
+    episode, = utils.make_expert_episodes(cfg, None, 1)
     first = int(episode["next", "success"].squeeze(-1).float().argmax())
     assert len(episode) == (first + 6 if length is None else length)
 
@@ -102,7 +105,7 @@ def test_sac_baseline_preloads_experts_without_an_encoder(tmp_path):
                  "train.episodes=1", "env.max_episode_steps=20")
     assert (cfg.reward.positional, cfg.reward.directional) == ("none", "none")
     assert sac_temporal.train(cfg)["episodes"] == 1
-    assert utils.load_checkpoint(tmp_path / "run")["inserted"] == 2
+    assert RunDirectory(tmp_path / "run").load_checkpoint()["inserted"] == 2
 
 
 USER_REWARD = """
@@ -153,11 +156,13 @@ def test_beyond_thesis_rewards_train_and_resume_exactly(tmp_path, overrides):
     sac_temporal.train(config(tmp_path / "b", *common, "train.stop_after_episodes=2"))
     resumed = sac_temporal.train(config(tmp_path / "b", "resume=true"))
     assert resumed["successes"] == straight["successes"]
-    first, second = (utils.load_checkpoint(tmp_path / name / "run") for name in ("a", "b"))
+    first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint()
+                     for name in ("a", "b"))
     assert first["reward"].keys() == second["reward"].keys()
     for key, value in first["reward"].items():
         torch.testing.assert_close(second["reward"][key], value, msg=key)
-    for saved, loaded in zip(first["head_optimizers"], second["head_optimizers"], strict=True):
+    for saved, loaded in zip(first["trainer"]["optimizers"], second["trainer"]["optimizers"],
+                             strict=True):
         for index, moments in saved["state"].items():
             torch.testing.assert_close(loaded["state"][index]["exp_avg"], moments["exp_avg"])
     assert episode_rows(tmp_path / "a" / "run") == episode_rows(tmp_path / "b" / "run")
@@ -169,7 +174,7 @@ def test_beyond_thesis_rewards_train_and_resume_exactly(tmp_path, overrides):
         assert "reward/loss_directional" not in metrics
     elif "reward.certainty_scaling=true" in overrides:
         assert first["reward"]["certainty.labels"].abs().sum() == 2 * 16  # a batch of each
-        assert "xcertainty" in str(utils.default_run_dir(config(tmp_path, *overrides)))
+        assert "xcertainty" in str(default_run_dir(config(tmp_path, *overrides)))
     else:
         assert first["reward"]["directional_heads.image.position_embedding"].shape == (3, 64)
 
@@ -209,7 +214,7 @@ def test_kill_and_resume_continues_the_run(tmp_path):
     run_dir = tmp_path / "run"
     assert len(episode_rows(run_dir)) == 2 and not (run_dir / "summary.json").exists()
     # a killed run leaves an episode row the checkpoint may not cover: it is dropped on resume
-    utils.append_episode_row(run_dir, {"episode": 3, "env_steps": 999, "success": 0,
+    RunDirectory(run_dir).append_episode({"episode": 3, "env_steps": 999, "success": 0,
                                        "return": 0.0, "mean_vlm_reward": 0.0, "stage": 1})
     with pytest.raises(FileExistsError, match="resume=true"):
         sac_temporal.train(config(tmp_path, "train.episodes=4"))
@@ -218,7 +223,7 @@ def test_kill_and_resume_continues_the_run(tmp_path):
     assert [int(row["episode"]) for row in rows] == [1, 2, 3, 4]
     assert [int(row["env_steps"]) for row in rows] == [20, 40, 60, 80]
     assert summary["episodes"] == 4 and summary["env_steps"] == 80
-    assert utils.load_checkpoint(run_dir)["inserted"] == 4
+    assert RunDirectory(run_dir).load_checkpoint()["inserted"] == 4
 
 
 def test_resume_continues_with_the_saved_config(tmp_path, capsys):
@@ -243,13 +248,13 @@ def test_resume_changes_only_the_resumable_keys_given(tmp_path, capsys):
     run_dir = tmp_path / "run"
     # On the command line: `resume=true output_dir=...` restates neither value.
     cfg = config(tmp_path, "resume=true", "train.episodes=3", "train.checkpoint_every=2")
-    resumed = utils.resumed_config(cfg, run_dir, utils.override_keys(
+    resumed = resumed_config(cfg, run_dir, override_keys(
         ["resume=true", f"output_dir={run_dir}", "+train.checkpoint_every=2"]))
     assert resumed.train.episodes == 6 and resumed.train.checkpoint_every == 2
     assert resumed.resume and resumed.train.stop_after_episodes is None
     assert "not using the current values of train.episodes" in capsys.readouterr().out
     # A config built in code means all of its values.
-    assert utils.resumed_config(cfg, run_dir).train.episodes == 3
+    assert resumed_config(cfg, run_dir).train.episodes == 3
 
 
 def test_resume_validates_the_config_it_runs(tmp_path):
@@ -268,20 +273,21 @@ def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
     run_dir = tmp_path / "run"
     stage2 = ["protocol=stage2", "train.preload_positives=1", "train.random_steps=5"]
     sac_temporal.train(config(tmp_path, *stage2, "train.episodes=2"))
-    expert_rows = utils.load_checkpoint(run_dir)["expert_rows"]
-    assert utils.load_checkpoint(run_dir)["buffer_capacity"] == 2 * 21 + expert_rows
+    expert_rows = RunDirectory(run_dir).load_checkpoint()["expert_rows"]
+    assert RunDirectory(run_dir).load_checkpoint()["buffer_capacity"] == 2 * 21 + expert_rows
     summary = sac_temporal.train(config(tmp_path, "resume=true", "train.episodes=5"))
     assert summary["episodes"] == 5
-    assert utils.load_checkpoint(run_dir)["buffer_capacity"] == 5 * 21 + expert_rows
+    assert RunDirectory(run_dir).load_checkpoint()["buffer_capacity"] == 5 * 21 + expert_rows
     assert f"replay capacity grown from {2 * 21 + expert_rows} to {5 * 21 + expert_rows}" in (
         capsys.readouterr().out)
 
     small = config(tmp_path, *stage2, "train.episodes=6", "overwrite=true",
                    f"replay_buffer.capacity={expert_rows + 2 * 21}")
     sac_temporal.train(small)
-    state = utils.load_checkpoint(run_dir)
-    buffer = utils.make_replay_buffer(small, state["buffer_capacity"])
-    utils.load_replay_episodes(run_dir, buffer, state["inserted"], permanent=state["preloaded"])
+    state = RunDirectory(run_dir).load_checkpoint()
+    buffer = utils.make_replay_buffer(small, state["buffer_capacity"], reward=None)
+    for rows in RunDirectory(run_dir).replay_episodes(state["inserted"]):
+        buffer.extend(rows)
     stored = set(buffer.sample(1000)["episode"].tolist())
     assert stored == {0, 5, 6}  # the expert and the last two training episodes
     assert buffer.has_positives
@@ -290,7 +296,7 @@ def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
 def test_default_run_directories_differ_by_protocol_preset_and_seed():
     def run_dir(*overrides):
         with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
-            return utils.default_run_dir(compose("config", overrides=list(overrides)))
+            return default_run_dir(compose("config", overrides=list(overrides)))
 
     runs = [("preset=best", "protocol=stage1"), ("preset=best", "protocol=stage2"),
             ("preset=furl", "protocol=stage2"), ("preset=furl_rho1", "protocol=stage2"),
@@ -339,7 +345,7 @@ def test_killed_process_resumes(tmp_path):
         time.sleep(0.05)
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
-    done = utils.load_checkpoint(run_dir)["episode"]
+    done = RunDirectory(run_dir).load_checkpoint()["episode"]
     assert done >= 2
     # The README's command: nothing restated, so the run keeps its own 1,000 episodes (here it
     # is stopped one episode later, as if killed again, without writing a summary).

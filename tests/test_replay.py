@@ -1,17 +1,18 @@
-"""Episode replay buffer: histories by index, boundaries, starts, overwrite, labels, memory."""
+"""Episode replay on TorchRL's buffer API: histories by index, boundaries, starts, overwrite,
+labels, finetuning groups, the relabelling transform, TorchRL's dumps/loads, memory."""
 
 import pytest
 import torch
 from tensordict import TensorDict
 
 from temporal_torchrl.data import (
-    NEGATIVE,
     POSITIVE,
     EpisodeReplayBuffer,
     episode_labels,
+    episode_rows,
     goal_image_embedding,
+    transition_index,
 )
-from temporal_torchrl.transforms import episode_windows
 
 D = 4
 
@@ -38,6 +39,18 @@ def marker(values: torch.Tensor) -> torch.Tensor:
     return values[..., 0]
 
 
+def insert(buffer: EpisodeReplayBuffer, episode: int, steps: int, successes=(), **kwargs):
+    """Insert make_episode(episode, steps, successes) into ``buffer``; returns its rows."""
+    return buffer.extend(episode_rows(make_episode(episode, steps, successes, **kwargs)))
+
+
+def all_transitions(buffer: EpisodeReplayBuffer) -> TensorDict:
+    """Every sampleable transition, through the buffer's own index arithmetic and transform."""
+    rows = buffer.writer.rows()
+    return buffer[transition_index(rows["transitions"], rows["steps"], buffer.history,
+                                   buffer.window_length)]
+
+
 def check_histories(buffer: EpisodeReplayBuffer, batch: TensorDict) -> None:
     k = buffer.history
     step, episode = batch["step"], batch["episode"]
@@ -54,9 +67,9 @@ def check_histories(buffer: EpisodeReplayBuffer, batch: TensorDict) -> None:
 def test_every_transition_with_histories_never_crossing_episodes():
     buffer = EpisodeReplayBuffer(capacity=200, history=3)
     for episode, steps in enumerate((7, 2, 12)):
-        buffer.extend(make_episode(episode, steps))
+        insert(buffer, episode, steps)
     assert buffer.num_transitions == 7 + 2 + 12
-    batch = buffer.transitions_at(buffer._transitions)
+    batch = all_transitions(buffer)
     check_histories(buffer, batch)
     # every step of every episode, starts included, is a sampleable transition
     pairs = set(zip(batch["episode"].tolist(), batch["step"].tolist(), strict=True))
@@ -64,11 +77,12 @@ def test_every_transition_with_histories_never_crossing_episodes():
     last = batch["next", "truncated"].squeeze(-1)
     assert torch.equal(last, batch["step"] == torch.tensor([7, 2, 12])[batch["episode"]] - 1)
     assert not batch["next", "terminated"].any()
+    assert torch.equal(batch["next", "reward"], batch["next", "success"].float() - 1.0)
     sampled = buffer.sample(500)
     check_histories(buffer, sampled)
     assert (sampled["step"] == 0).any()
     assert sampled["next", "embedding"].dtype == torch.float32
-    assert buffer._column("embedding").dtype == torch.float16
+    assert buffer.storage.get(slice(None))["embedding"].dtype == torch.float16
 
 
 def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
@@ -79,24 +93,25 @@ def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
     length = 4
     buffer = EpisodeReplayBuffer(capacity=24, history=2, window_length=length)
     for episode, steps in enumerate((11, 10, 9)):  # the third wraps to row 0
-        buffer.extend(make_episode(episode, steps))
+        insert(buffer, episode, steps)
     assert buffer.num_episodes == 2
-    batch = buffer.transitions_at(buffer._transitions)
+    batch = all_transitions(buffer)
     check_histories(buffer, batch)
     expected = (100.0 * batch["episode"].unsqueeze(-1) + torch.clamp(
         batch["step"].unsqueeze(-1) + 1 - torch.arange(length - 1, -1, -1), min=0))
     assert torch.equal(marker(batch["next", "embedding_window"]), expected)
-    states = buffer.states_at(torch.arange(10))  # episode 2: s_0 .. s_9
-    assert marker(states["embedding_window"]).tolist()[:4] == [
-        [200.0] * 4, [200.0, 200.0, 200.0, 201.0], [200.0, 200.0, 201.0, 202.0],
-        [200.0, 201.0, 202.0, 203.0]]
-    assert torch.equal(states["embedding_window"], episode_windows(states["embedding"], length))
-    finetuning = buffer.sample_finetuning(64)
-    negatives = finetuning["negative"]
-    assert torch.equal(marker(negatives["embedding_window"][:, -1]), marker(
-        negatives["embedding"]))
+    negatives = buffer.finetuning.sample(500)["negative"]
+    window = marker(negatives["embedding_window"])
+    step = negatives["step"].unsqueeze(-1)
+    assert torch.equal(window, 100.0 * negatives["episode"].unsqueeze(-1) + torch.clamp(
+        step - torch.arange(length - 1, -1, -1), min=0))
+    assert torch.equal(window[:, -1], marker(negatives["embedding"]))
+    assert {tuple(row) for row in window[negatives["episode"] == 2].tolist()} >= {
+        (200.0, 200.0, 200.0, 201.0), (200.0, 200.0, 201.0, 202.0),
+        (200.0, 201.0, 202.0, 203.0)}
+    assert torch.equal(negatives["embedding_window"][:, -1], negatives["embedding"])
     plain = EpisodeReplayBuffer(capacity=24, history=2)
-    plain.extend(make_episode(0, 5))
+    insert(plain, 0, 5)
     assert "embedding_window" not in plain.sample(4)["next"].keys()
     with pytest.raises(ValueError, match="window_length=1"):
         EpisodeReplayBuffer(capacity=24, window_length=1)
@@ -104,77 +119,129 @@ def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
 
 def test_overwrite_invalidates_whole_old_episodes():
     buffer = EpisodeReplayBuffer(capacity=30, history=2)
-    buffer.extend(make_episode(0, 9))   # rows 0..9
-    buffer.extend(make_episode(1, 9))   # rows 10..19
-    buffer.extend(make_episode(2, 4))   # rows 20..24
-    buffer.extend(make_episode(3, 6))   # 7 rows do not fit after 25: rows 0..6, episode 0 goes
+    insert(buffer, 0, 9)   # rows 0..9
+    insert(buffer, 1, 9)   # rows 10..19
+    insert(buffer, 2, 4)   # rows 20..24
+    assert insert(buffer, 3, 6).tolist() == list(range(7))  # no room after 25: episode 0 goes
     assert buffer.num_episodes == 3
-    batch = buffer.transitions_at(buffer._transitions)
+    batch = all_transitions(buffer)
     assert set(batch["episode"].tolist()) == {1, 2, 3}
     check_histories(buffer, batch)
-    buffer.extend(make_episode(4, 5))   # rows 7..12: overlaps episode 1's first rows only
-    batch = buffer.transitions_at(buffer._transitions)
+    insert(buffer, 4, 5)   # rows 7..12: overlaps episode 1's first rows only
+    batch = all_transitions(buffer)
     assert set(batch["episode"].tolist()) == {2, 3, 4}
     assert buffer.num_transitions == 4 + 6 + 5
     check_histories(buffer, buffer.sample(300))
     with pytest.raises(ValueError, match="capacity"):
-        buffer.extend(make_episode(5, 40))
+        insert(buffer, 5, 40)
+    with pytest.raises(RuntimeError, match="whole episodes"):
+        buffer.add(episode_rows(make_episode(6, 3))[0])
 
 
-def test_labels_follow_furl_rule():
+def test_labels_follow_furl_rule_and_groups_follow_the_stage():
     success = torch.tensor([False, False, True, True, False, True])
     assert episode_labels(success).tolist() == [1, 1, 1, 1, 0, 0]
     assert episode_labels(torch.zeros(3, dtype=torch.bool)).tolist() == [-1, -1, -1]
     assert episode_labels(torch.tensor([True])).tolist() == [1]
 
-    buffer = EpisodeReplayBuffer(capacity=200, history=2)
-    buffer.extend(make_episode(0, 10))
+    buffer = EpisodeReplayBuffer(capacity=200, history=2, gap=10)
+    insert(buffer, 0, 10)
     assert not buffer.has_positives
-    stage1 = buffer.sample_finetuning(8)
-    assert set(stage1.keys()) == {"negative"}
-    buffer.extend(make_episode(1, 30, successes=(14, 15, 16, 20)))
+    assert set(buffer.finetuning.sample(8).keys()) == {"negative"}
+    insert(buffer, 1, 30, successes=(14, 15, 16, 20))
     assert buffer.has_positives
-    positives = buffer.sample_states(400, POSITIVE)
+    batch = buffer.finetuning.sample(400)
+    assert set(batch.keys()) == {"negative", "positive", "positive_pair"}
+    positives = batch["positive"]
     assert (positives["label"] == POSITIVE).all() and (positives["episode"] == 1).all()
     # states s_1 .. s_17: transitions 0..16 are positive (first success 14, then 15 and 16);
     # the reset frame s_0 is never labelled
     assert set(positives["step"].tolist()) == set(range(1, 18))
-    negatives = buffer.sample_states(200, NEGATIVE)
+    assert buffer.num_positive_states == 17
+    negatives = batch["negative"]
     assert (negatives["episode"] == 0).all()
+    assert set(negatives["step"].tolist()) == set(range(1, 11))
+    assert torch.equal(marker(negatives["embedding"]), negatives["step"].float())
     assert torch.equal(marker(negatives["previous_embedding"]),
                        torch.clamp(negatives["step"] - 2, min=0).float())
-    pairs = buffer.sample_positive_pairs(100, gap=10)
-    assert torch.equal(pairs["later", "step"] - pairs["earlier", "step"], torch.full((100,), 10))
+    assert (marker(negatives["initial_embedding"]) == 0).all()
+    pairs = batch["positive_pair"]
+    assert torch.equal(pairs["later", "step"] - pairs["earlier", "step"], torch.full((400,), 10))
     assert torch.equal(pairs["later", "episode"], pairs["earlier", "episode"])
+    assert torch.equal(marker(pairs["later", "embedding"]) - marker(pairs["earlier", "embedding"]),
+                       torch.full((400,), 10.0))
     assert (pairs["earlier", "label"] == POSITIVE).all()
     assert set(pairs["earlier", "step"].tolist()) == set(range(1, 8))
-    assert buffer.sample_positive_pairs(4, gap=17) is None
-    stage2 = buffer.sample_finetuning(8, gap=10)
-    assert set(stage2.keys()) == {"negative", "positive", "positive_pair"}
+    no_pairs = EpisodeReplayBuffer(capacity=200, history=2, gap=17)
+    insert(no_pairs, 1, 30, successes=(14, 15, 16, 20))
+    assert set(no_pairs.finetuning.sample(4).keys()) == {"positive"}
 
 
 def test_permanent_episodes_survive_wrap_around():
     """Preloaded experts are never overwritten: the ring wraps to the row after them."""
-    buffer = EpisodeReplayBuffer(capacity=40, history=2)
-    buffer.extend(make_episode(0, 9, successes=(8,)), permanent=True)  # rows 0..9
+    buffer = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=1)
+    insert(buffer, 0, 9, successes=(8,))  # rows 0..9
     for episode in range(1, 8):  # 10 rows each: the ring (rows 10..39) wraps twice
-        buffer.extend(make_episode(episode, 9))
+        insert(buffer, episode, 9)
     assert buffer.num_permanent_episodes == 1 and buffer.has_positives
     stored = set(buffer.sample(2000)["episode"].tolist())
     assert stored == {0, 5, 6, 7}
     check_histories(buffer, buffer.sample(300))
-    with pytest.raises(ValueError, match="before any other episode"):
-        buffer.extend(make_episode(8, 9), permanent=True)
     with pytest.raises(ValueError, match="10 rows hold permanent episodes"):
-        buffer.extend(make_episode(9, 30))
+        insert(buffer, 9, 30)
+    too_big = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=2)
+    insert(too_big, 0, 25, successes=(8,))
+    with pytest.raises(ValueError, match="permanent episodes fill more than"):
+        insert(too_big, 1, 20, successes=(8,))
 
 
 def test_label_window_keeps_most_recent():
     buffer = EpisodeReplayBuffer(capacity=500, history=2, label_window=12)
     for episode in range(4):
-        buffer.extend(make_episode(episode, 9))
-    negatives = buffer.sample_states(300, NEGATIVE)
-    assert set(negatives["episode"].tolist()) <= {2, 3}
+        insert(buffer, episode, 9)
+    negatives = buffer.finetuning.sample(300)["negative"]
+    assert set(negatives["episode"].tolist()) == {2, 3}
+    assert set(zip(negatives["episode"].tolist(), negatives["step"].tolist(), strict=True)) == {
+        (2, t) for t in range(7, 10)} | {(3, t) for t in range(1, 10)}
+
+
+def test_sac_batches_are_relabelled_by_the_reward_as_it_is_now():
+    """The buffer's transform is the env's reward transform: changing the heads changes the
+    sampled rewards, and each equals the reward recomputed from the batch's embeddings."""
+    from temporal_torchrl.rewards import TemporalReward
+
+    reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
+                            directional="d3", rho=1.0, lambda_=2.0, k=2)
+    buffer = EpisodeReplayBuffer(capacity=100, history=2, reward=reward, batch_size=64)
+    insert(buffer, 0, 30, successes=(20,))
+    for _ in range(2):
+        batch = buffer.sample()
+        nxt = batch["next"]
+        with torch.no_grad():
+            expected = reward(nxt["embedding"], nxt["initial_embedding"],
+                              nxt["previous_embedding"], nxt["success"])["reward"]
+        torch.testing.assert_close(nxt["reward"], expected)
+        assert not torch.equal(nxt["reward"], nxt["success"].float() - 1.0)
+        with torch.no_grad():
+            for parameter in reward.parameters():
+                parameter.add_(1.0)
+
+
+def test_buffer_state_round_trips_through_torchrl_dumps_and_loads(tmp_path):
+    """TorchRL's own checkpointing (storage, writer, sampler) restores the episodes, the ring's
+    cursor and the permanent rows: the next write lands where it would have."""
+    buffer = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=1)
+    insert(buffer, 0, 9, successes=(8,))
+    for episode in range(1, 5):
+        insert(buffer, episode, 9)
+    buffer.dumps(tmp_path / "buffer")
+    restored = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=1)
+    restored.loads(tmp_path / "buffer")
+    assert restored.writer.episodes == buffer.writer.episodes
+    assert torch.equal(all_transitions(restored)["next", "embedding"],
+                       all_transitions(buffer)["next", "embedding"])
+    # episodes 1..3 filled rows 10..39, episode 4 wrapped to rows 10..19 (after the expert)
+    assert insert(restored, 5, 9).tolist() == insert(buffer, 5, 9).tolist() == list(range(20, 30))
 
 
 def test_goal_image_embedding_is_first_success_state():
@@ -188,7 +255,7 @@ def test_memory_at_500k_transitions_is_under_budget():
     capacity = 5 * 501
     buffer = EpisodeReplayBuffer(capacity=capacity, history=5)
     for episode in range(5):
-        buffer.extend(make_episode(episode, 500, dim=1024))
+        insert(buffer, episode, 500, dim=1024)
     per_row = buffer.memory_bytes() / capacity
     rows = 1000 * 501
     assert per_row * rows < 1.2e9, per_row
@@ -196,8 +263,8 @@ def test_memory_at_500k_transitions_is_under_budget():
 
 def test_episodes_must_carry_the_same_keys():
     buffer = EpisodeReplayBuffer(capacity=50, history=2)
-    buffer.extend(make_episode(0, 5).exclude("embedding", ("next", "embedding")))
+    buffer.extend(episode_rows(make_episode(0, 5).exclude("embedding", ("next", "embedding"))))
     batch = buffer.sample(4)
     assert "embedding" not in batch["next"].keys() and batch["next", "observation"].shape == (4, 39)
     with pytest.raises(ValueError, match="same encoder, or none of them"):
-        buffer.extend(make_episode(1, 5))
+        insert(buffer, 1, 5)

@@ -8,7 +8,7 @@ import utils
 from tensordict import TensorDict
 from test_recipe import config
 
-from temporal_torchrl.data import EpisodeReplayBuffer
+from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows, transition_index
 from temporal_torchrl.objectives import PositionalRankingLoss
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, register_reward, unregister_reward
 
@@ -38,15 +38,14 @@ def test_rendered_rollout_relabelled_from_the_buffer_gives_the_env_rewards(tmp_p
                  "replay_buffer.embedding_dtype=float32")
     torch.manual_seed(0)
     encoder = utils.make_encoder(cfg)
-    reward = utils.make_temporal_reward(cfg, encoder)
+    reward = utils.make_reward(cfg, encoder)
     env = utils.make_environment(cfg, encoder, reward)
     rollout = env.rollout(12, break_when_any_done=False)
     env.close()
-    buffer = utils.make_replay_buffer(cfg, capacity=100)
-    buffer.extend(rollout)
-    rows = torch.arange(12)  # the episode's transitions, in order
-    batch = buffer.transitions_at(rows)
-    env.transform[-1](batch)  # the relabelling transform of the recipe
+    buffer = utils.make_replay_buffer(cfg, capacity=100, reward=reward)
+    buffer.extend(episode_rows(rollout, embedding_dtype=torch.float32))
+    rows = torch.arange(12)  # the episode's transitions, in order (steps = rows)
+    batch = buffer[transition_index(rows, rows, cfg.reward.k)]  # relabelled by its transform
     with torch.no_grad():
         expected = furl_plus_d3(reward, batch["next"])
     env_rewards = rollout["next", "reward"].squeeze(-1)
@@ -64,9 +63,9 @@ def test_sac_loss_receives_the_relabelled_rewards(tmp_path, monkeypatch):
     from torchrl.objectives import SACLoss
 
     made = []
-    make_temporal_reward = utils.make_temporal_reward
-    monkeypatch.setattr(utils, "make_temporal_reward",
-                        lambda *args: made.append(make_temporal_reward(*args)) or made[-1])
+    make_reward = utils.make_reward
+    monkeypatch.setattr(utils, "make_reward",
+                        lambda *args: made.append(make_reward(*args)) or made[-1])
     checked = []
     forward = SACLoss.forward
 
@@ -171,22 +170,22 @@ def test_ranking_loss_learns_to_order_expert_states_by_time(tmp_path):
 
     cfg = config(tmp_path, "train.expert_steps_after_success=0", "env.max_episode_steps=500")
     torch.manual_seed(0)
-    experts = utils.collect_successful_experts(cfg, encoder=None, count=4)
+    experts = utils.make_expert_episodes(cfg, None, 4)
     encoder = load_encoder("state", dim=32)
-    buffer = EpisodeReplayBuffer(capacity=5000, history=5, embedding_dtype=torch.float32)
+    buffer = EpisodeReplayBuffer(capacity=5000, history=5, gap=10)
     embed = encoder.embed
     for episode in experts[:3]:
         episode = episode.clone()
         episode["embedding"] = embed(episode["observation"])
         episode["next", "embedding"] = embed(episode["next", "observation"])
-        buffer.extend(episode)
+        buffer.extend(episode_rows(episode, embedding_dtype=torch.float32))
     env = make_env(cfg.env.task, cfg.env.seed, render=False, max_episode_steps=200)
     random_episode = env.rollout(200)  # uniform random actions: a failed episode
     env.close()
     assert not random_episode["next", "success"].any()
     random_episode["embedding"] = embed(random_episode["observation"])
     random_episode["next", "embedding"] = embed(random_episode["next", "observation"])
-    buffer.extend(random_episode)
+    buffer.extend(episode_rows(random_episode, embedding_dtype=torch.float32))
     texts = encoder.embed_text(["open a drawer", "robot arm beside table"])
     held_out = embed(experts[3]["next", "observation"])
     before, after = [], []
@@ -198,7 +197,7 @@ def test_ranking_loss_learns_to_order_expert_states_by_time(tmp_path):
         with torch.no_grad():
             before.append(spearman(reward.positional_reward(held_out)))
         for _ in range(200):
-            value = loss(buffer.sample_finetuning(64, gap=10))["loss_positional"]
+            value = loss(buffer.finetuning.sample(64))["loss_positional"]
             optimizer.zero_grad()
             value.backward()
             optimizer.step()

@@ -202,12 +202,12 @@ def test_scoring_refuses_a_reward_with_two_parts(held_out_episodes):
 
 def test_finetuning_trains_heads_towards_the_labels(held_out_episodes):
     successful, failed = held_out_episodes
-    buffer = make_finetuning_buffer([*successful, *failed], history=3)
+    buffer = make_finetuning_buffer([*successful, *failed], history=3, gap=3)
     torch.manual_seed(0)
     reward = variant_reward("furl", D, torch.ones(D), torch.zeros(D), k=3)
     before = score_reward(reward, successful, failed).auroc
     losses = finetune_reward(reward, buffer, successful[0]["next", "embedding"][29],
-                             updates=150, batch_size=32, gap=3, lr=1e-2)
+                             updates=150, batch_size=32, lr=1e-2)
     assert set(losses) == {"loss_positional"}
     after = score_reward(reward, successful, failed)
     assert after.auroc > max(before, 0.9)

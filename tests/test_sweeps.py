@@ -7,10 +7,11 @@ import subprocess
 import sys
 
 import pytest
-import utils
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from test_recipe import QUICK, RECIPES
+
+from temporal_torchrl.training.config import threads_per_job
 
 STUDIES = {  # study: (presets, protocol, runs)
     "table_5_2": ("furl,p2,p3,d3", "stage1", 96),
@@ -62,10 +63,10 @@ def test_submitit_slurm_launcher_resolves_without_slurm():
 
 def test_joblib_jobs_share_the_cores():
     cores = os.cpu_count()
-    assert utils.threads_per_job(OmegaConf.create({"n_jobs": -1})) == 1
-    assert utils.threads_per_job(OmegaConf.create({"n_jobs": 1})) == cores
-    assert utils.threads_per_job(OmegaConf.create({"n_jobs": 2 * cores})) == 1
-    assert utils.threads_per_job(OmegaConf.create({"partition": "gpu"})) is None
+    assert threads_per_job(OmegaConf.create({"n_jobs": -1})) == 1
+    assert threads_per_job(OmegaConf.create({"n_jobs": 1})) == cores
+    assert threads_per_job(OmegaConf.create({"n_jobs": 2 * cores})) == 1
+    assert threads_per_job(OmegaConf.create({"partition": "gpu"})) is None
 
 
 def test_a_finished_run_returns_its_summary_untouched(tmp_path, capsys):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDict, TensorDictBase
 
-from temporal_torchrl.data.replay import EpisodeReplayBuffer
+from temporal_torchrl.data.replay import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs import first_success_index
 
@@ -52,20 +52,22 @@ def goal_image_embedding(episode: TensorDictBase, encoder: Encoder | None = None
 
 
 def preload_experts(buffer: EpisodeReplayBuffer, episodes: list[TensorDictBase],
-                    encoder: Encoder | None = None) -> list[TensorDict]:
-    """Insert expert episodes (stage 2's preloaded positives); returns their compact rows.
+                    encoder: Encoder | None = None,
+                    embedding_dtype: torch.dtype = torch.float16) -> list[TensorDict]:
+    """Insert expert episodes (stage 2's preloaded positives); returns their stored rows.
 
     Episodes without embeddings are embedded with ``encoder``; with no encoder they are stored as
     they are (observations only, as for SAC without a VLM reward). They are labelled by the same
     rule as training episodes (:func:`~temporal_torchrl.data.episode_labels`): a successful expert
     episode, cut a few steps after its first success, is positive up to its first success and
     through the success steps right after it (steps after success flips back off, as it can in
-    door-open and push, stay unlabelled). They are inserted as permanent episodes: however long
-    the run, the ring of training episodes never overwrites them.
+    door-open and push, stay unlabelled). Build the buffer with ``permanent_episodes`` equal to
+    their number: however long the run, the ring of training episodes never overwrites them.
     """
     rows = []
     for episode in episodes:
         if "embedding" not in episode.keys() and encoder is not None:
             episode = embed_episode(episode, encoder)
-        rows.append(buffer.extend(episode, permanent=True))
+        rows.append(episode_rows(episode, embedding_dtype=embedding_dtype))
+        buffer.extend(rows[-1])
     return rows

@@ -1,28 +1,38 @@
-"""Episode replay buffer: whole episodes, compact embeddings, sub-trajectory sampling by index.
+"""Episode replay on TorchRL's buffer API: whole episodes, compact embeddings, histories by index.
 
-Layout. An episode of ``T`` transitions is stored as ``T + 1`` consecutive rows of a TorchRL
-:class:`~torchrl.data.LazyTensorStorage`, one row per *state* ``s_0 .. s_T``: row ``t`` holds the
-observation and embedding of state ``t``, its success flag, and the action ``a_t`` taken from it
-(zeros in the last row). Transition ``t`` is the row pair ``(t, t + 1)``. So each embedding is
-stored once, and every history the rewards need is index arithmetic inside the episode:
+Layout. An episode of ``T`` transitions is stored as ``T + 1`` consecutive rows of a
+:class:`~torchrl.data.LazyTensorStorage`, one row per *state* ``s_0 .. s_T``
+(:func:`episode_rows`): row ``t`` holds the observation and embedding of state ``t``, its success
+flag, and the action ``a_t`` taken from it (zeros in the last row). Transition ``t`` is the row
+pair ``(t, t + 1)``. Each embedding is stored once, and every history the rewards need is index
+arithmetic inside the episode:
 
 - ``s_{t+1}``   = row ``t + 1``
 - ``s_0``       = row ``t - step_t`` (the episode's first row)
 - ``s_{t+1-k}`` = row ``t + 1 - min(t + 1, k)`` (clamped to ``s_0`` at the episode start, as the
   history transform does during collection)
-- the window ``s_{t+2-K} .. s_{t+1}`` (d_sequence, with ``window_length=K``) = rows
+- the window ``s_{t+2-K} .. s_{t+1}`` (d_sequence, ``window_length=K``) = rows
   ``t + 1 - min(t + 1, K - 1 - j)``, ``j = 0 .. K - 1`` (padded with ``s_0`` likewise)
+
+The TorchRL parts:
+
+- :class:`EpisodeWriter` writes each episode contiguously (wrapping to the first row after the
+  permanent episodes when the tail is too short) and invalidates every older episode it
+  overlaps *as a whole*, so no index arithmetic can reach into a newer episode. TorchRL's
+  ``RoundRobinWriter`` splits an episode across the end of the storage and leaves the older
+  half of an overwritten one readable.
+- :class:`TransitionSampler` draws transitions uniformly over the valid rows, episode starts
+  included (``SliceSampler(strict_length=True)`` never gives the first ``k`` steps a full
+  history), and returns for each the rows ``[t, t + 1, s_0, s_{t+1-k}, window...]``;
+  :class:`TransitionLayout`, the buffer's transform, turns those rows into SAC's transition
+  layout, and a :class:`~temporal_torchrl.transforms.TemporalRewardTransform` after it relabels
+  ``("next", "reward")`` with the heads as they are now.
+- :class:`FinetuningSampler` draws the reward-finetuning groups (negatives, positives, positive
+  pairs) from the same storage, through a second buffer on it (``buffer.finetuning``), whose
+  transform :class:`FinetuningLayout` names the groups.
 
 Pixels are never stored; embeddings are kept in ``float16`` by default (1024-d: 2 KiB a state),
 which puts 500,000 transitions with D = 1024 at about 1.12 GB.
-
-Why not TorchRL's writer and samplers as they are: ``RoundRobinWriter`` splits an episode across
-the end of the storage and leaves the older half of an overwritten episode readable, so a
-lagged index could land in a newer episode; ``SliceSampler(strict_length=True)`` never samples
-the first ``k`` steps of an episode with a full history window. This class therefore writes
-each episode contiguously (wrapping to row 0 when the tail is too short), invalidates every
-older episode it overlaps *as a whole*, and samples uniformly over valid rows with cached index
-sets, using ``LazyTensorStorage`` for the memory itself.
 
 Labels (FuRL's rule, :func:`episode_labels`) are written when an episode is inserted, i.e. when
 it has ended: ``+1`` positive, ``-1`` negative, ``0`` unlabelled. They label the states reached by
@@ -30,10 +40,10 @@ a step, s_1 .. s_T: the reset frame s_0 is never labelled, as in the reference i
 (which embed after ``env.step``). With a fixed layout s_0 is the same image in every episode, so
 labelling it would sample one state as a positive and as a negative at once.
 
-Permanent episodes (``extend(..., permanent=True)``, stage 2's preloaded experts) are written
-first and kept apart from the ring: when the buffer wraps, it wraps to the row after them, so
-they are never overwritten, however long the run (FuRL keeps its positives in a buffer of their
-own for the same reason).
+Permanent episodes (the first ``permanent_episodes`` inserted: stage 2's preloaded experts) sit
+at the start of the storage, outside the ring: when the buffer wraps, it wraps to the row after
+them, so they are never overwritten however long the run (FuRL keeps its positives in a buffer
+of their own for the same reason).
 
 Example:
     >>> import torch
@@ -46,26 +56,37 @@ Example:
     ...              "success": torch.zeros(T, 1, dtype=torch.bool),
     ...              "terminated": torch.zeros(T, 1, dtype=torch.bool)}}, [T])
     >>> buffer = EpisodeReplayBuffer(capacity=100, history=2)
-    >>> _ = buffer.extend(episode)
+    >>> _ = buffer.extend(episode_rows(episode))
     >>> batch = buffer.sample(4)
     >>> batch["next", "previous_embedding"].shape
     torch.Size([4, 8])
     >>> buffer.num_transitions, buffer.has_positives
     (6, False)
+    >>> sorted(buffer.finetuning.sample(4).keys())
+    ['negative']
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import LazyTensorStorage
+from torchrl.data import LazyTensorStorage, ReplayBuffer
+from torchrl.data.replay_buffers import ImmutableDatasetWriter, Sampler, Writer
+from torchrl.data.replay_buffers.storages import Storage
+from torchrl.envs.transforms import Compose, Transform
 
 POSITIVE = 1
 NEGATIVE = -1
 UNLABELLED = 0
 
-# State-level keys copied from an episode (when present), and their stored dtype.
-_STATE_KEYS = ("observation", "embedding")
+#: State-level keys copied from an episode (when present).
+STATE_KEYS = ("observation", "embedding")
+#: The finetuning groups, in the order :class:`FinetuningSampler` stacks them.
+FINETUNING_GROUPS = ("negative", "positive", "positive_pair")
 
 
 def episode_labels(next_success: torch.Tensor) -> torch.Tensor:
@@ -94,27 +115,263 @@ def episode_labels(next_success: torch.Tensor) -> torch.Tensor:
     return labels
 
 
-class EpisodeReplayBuffer:
-    """Whole-episode replay buffer with index-derived embedding histories (see module doc).
+def episode_rows(episode: TensorDictBase, *,
+                 embedding_dtype: torch.dtype = torch.float16) -> TensorDict:
+    """The ``T + 1`` stored rows of one ended episode given in ``env.rollout()`` layout ``[T]``.
+
+    Keys: ``observation`` and ``embedding`` (when the episode has them; embeddings in
+    ``embedding_dtype``), ``action`` (zeros in the last row), ``success``, ``terminated``,
+    ``label`` (:func:`episode_labels`, the reset row unlabelled), ``step`` and ``last``.
+    Pixels and every other key are left out.
+    """
+    if episode.ndim != 1 or episode.shape[0] < 1:
+        raise ValueError(f"episode has batch shape {tuple(episode.shape)}; expected one "
+                         "unbatched episode [T] with T >= 1 (split batched rollouts first).")
+    steps = episode.shape[0]
+    rows = {}
+    for key in STATE_KEYS:
+        if key in episode.keys():
+            states = torch.cat([episode[key][:1], episode["next", key]], 0)
+            rows[key] = states.to(embedding_dtype if key == "embedding" else torch.float32)
+    action = episode["action"].float()
+    rows["action"] = torch.cat([action, torch.zeros_like(action[:1])], 0)
+    next_success = episode["next", "success"].reshape(steps, 1).bool()
+    first_success = (episode["success"][:1].reshape(1, 1).bool() if "success" in episode.keys()
+                     else torch.zeros(1, 1, dtype=torch.bool))
+    rows["success"] = torch.cat([first_success, next_success], 0)
+    terminated = episode.get(("next", "terminated"), torch.zeros(steps, 1, dtype=torch.bool))
+    rows["terminated"] = torch.cat([torch.zeros(1, 1, dtype=torch.bool),
+                                    terminated.reshape(steps, 1).bool()], 0)
+    labels = episode_labels(next_success)
+    rows["label"] = torch.cat([torch.full((1,), UNLABELLED, dtype=torch.int8), labels], 0)
+    rows["step"] = torch.arange(steps + 1, dtype=torch.int32)
+    last = torch.zeros(steps + 1, dtype=torch.bool)
+    last[-1] = True
+    rows["last"] = last
+    return TensorDict(rows, [steps + 1])
+
+
+class EpisodeWriter(Writer):
+    """Writes one episode's rows (:func:`episode_rows`) per ``extend``, contiguously.
+
+    Each write invalidates every older episode it overlaps as a whole, and stamps the rows with
+    an ``"episode"`` id. The first ``permanent_episodes`` episodes are written at the start of the
+    storage and never overwritten: the ring wraps to the row after them. The writer keeps the
+    bookkeeping the samplers read (which rows are valid, and the row sets derived from them,
+    recomputed once per written episode, never per sample); ``version`` counts the writes.
 
     Args:
-        capacity: number of stored rows; an episode of ``T`` transitions takes ``T + 1`` rows
-            (one per state), so 500 transitions per episode use 0.2 % more than ``T`` rows.
-        history: ``k``, the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3).
-        embedding_dtype: storage dtype of the embeddings (``float16`` halves the memory; batches
-            are returned in ``float32``).
-        label_window: positives and negatives are sampled from the most recent
-            ``label_window`` labelled states of each kind (FuRL's two FIFO buffers of 20,000
-            embeddings); ``None`` uses all of them.
-        window_length: K (>= 2): batches also carry ``"embedding_window"``, the last K
-            embeddings of each state (``reward.window_length``; None: no window, the default).
+        permanent_episodes: how many of the first episodes are permanent (stage 2's preloaded
+            experts: ``train.preload_positives``).
     """
 
-    def __init__(self, capacity: int, *, history: int = 5,
-                 embedding_dtype: torch.dtype = torch.float16,
-                 label_window: int | None = 20_000, window_length: int | None = None) -> None:
-        if capacity < 2:
-            raise ValueError(f"capacity={capacity} must be >= 2 rows (one episode of one step).")
+    def __init__(self, permanent_episodes: int = 0) -> None:
+        super().__init__()
+        if isinstance(permanent_episodes, bool) or not isinstance(permanent_episodes, int) \
+                or permanent_episodes < 0:
+            raise ValueError(f"permanent_episodes={permanent_episodes!r}; expected an integer "
+                             ">= 0 (the preloaded expert episodes).")
+        self.permanent_episodes = permanent_episodes
+        self._empty()
+
+    def register_storage(self, storage: Storage) -> None:
+        super().register_storage(storage)
+        self._valid = torch.zeros(storage.max_size, dtype=torch.bool)
+
+    def _empty(self, empty_write_count: bool = True) -> None:
+        self._cursor = 0
+        self._permanent_rows = 0
+        self._next_episode = 0
+        self._write_count = 0
+        # episode id -> (first row, number of rows); only episodes still readable are kept.
+        self.episodes: dict[int, tuple[int, int]] = {}
+        self._keys: set[str] | None = None
+        self._positive_episodes = 0
+        if self._storage is not None:
+            self._valid = torch.zeros(self._storage.max_size, dtype=torch.bool)
+        self.version = 0
+        self._derived = None
+
+    @property
+    def capacity(self) -> int:
+        return self._storage.max_size
+
+    def add(self, data: Any) -> int:
+        raise RuntimeError("EpisodeWriter writes whole episodes: extend the buffer with the rows "
+                           "of one episode (episode_rows(rollout)), not with a single row.")
+
+    def extend(self, data: TensorDictBase) -> torch.Tensor:
+        length = data.shape[0] if data.ndim == 1 else 0
+        if length < 2 or "step" not in data.keys():
+            hint = (" It looks like a rollout: insert episode_rows(rollout)."
+                    if "next" in data.keys() else "")
+            raise ValueError(f"extend takes the rows of one episode (episode_rows(rollout): "
+                             f"[T + 1] with T >= 1); got shape {tuple(data.shape)} with keys "
+                             f"{sorted(data.keys())}.{hint}")
+        keys = set(data.keys()) - {"episode"}
+        if self._keys is not None and keys != self._keys:
+            raise ValueError(
+                f"an episode with keys {sorted(keys)} does not match the buffer's "
+                f"{sorted(self._keys)}; every episode must carry the same keys (embed all of "
+                "them with the same encoder, or none of them).")
+        permanent = self._next_episode < self.permanent_episodes
+        if permanent and self._cursor + length > self.capacity:
+            raise ValueError(f"permanent episodes fill more than capacity={self.capacity} rows; "
+                             "raise the buffer capacity.")
+        if length > self.capacity - self._permanent_rows:
+            raise ValueError(f"an episode of {length} rows does not fit in capacity="
+                             f"{self.capacity} ({self._permanent_rows} rows hold permanent "
+                             "episodes); raise the buffer capacity.")
+        start = self._cursor if self._cursor + length <= self.capacity else self._permanent_rows
+        index = torch.arange(start, start + length)
+        self._invalidate_overlapping(start, start + length)
+        episode_id = self._next_episode
+        data = data.clone(False)
+        data["episode"] = torch.full((length,), episode_id, dtype=torch.int64,
+                                     device=data.device)
+        self._storage.set(index, data)
+        self._valid[start:start + length] = True
+        self._keys = keys
+        self.episodes[episode_id] = (start, length)
+        self._positive_episodes += bool((data["label"] == POSITIVE).any())
+        self._next_episode += 1
+        self._cursor = start + length
+        self._write_count += length
+        if permanent:
+            self._permanent_rows = self._cursor
+        self.version += 1
+        self._derived = None
+        return index
+
+    def _invalidate_overlapping(self, start: int, stop: int) -> None:
+        labels = None
+        for episode_id, (first, length) in list(self.episodes.items()):
+            if first < stop and start < first + length:
+                self._valid[first:first + length] = False
+                if labels is None:
+                    labels = self.columns()["label"]
+                if bool((labels[first:first + length] == POSITIVE).any()):
+                    self._positive_episodes -= 1
+                del self.episodes[episode_id]
+
+    def columns(self) -> TensorDictBase:
+        """The stored rows as one TensorDict of views (no copy), rows ``0 .. len - 1``."""
+        return self._storage.get(slice(None))
+
+    def rows(self) -> dict[str, torch.Tensor]:
+        """The sampleable row sets, cached per write (CPU ``int64`` tensors):
+
+        ``transitions`` (valid rows that are not an episode's last) and their ``steps``;
+        ``positives`` and ``negatives`` (valid labelled states, ordered oldest episode first)
+        and their ``positive_steps`` / ``negative_steps``.
+        """
+        if self._derived is None:
+            self._derived = self._derive()
+        return self._derived
+
+    def _derive(self) -> dict[str, torch.Tensor]:
+        empty = torch.zeros(0, dtype=torch.int64)
+        if not self.episodes:
+            return dict.fromkeys(("transitions", "steps", "positives", "positive_steps",
+                                  "negatives", "negative_steps"), empty)
+        columns = self.columns().select("last", "label", "step", "episode").cpu()
+        valid = self._valid[:columns.shape[0]]
+        step = columns["step"].long()
+        transitions = torch.nonzero(valid & ~columns["last"]).reshape(-1)
+        derived = {"transitions": transitions, "steps": step[transitions]}
+        for name, label in (("positive", POSITIVE), ("negative", NEGATIVE)):
+            rows = torch.nonzero(valid & (columns["label"] == label)).reshape(-1)
+            rows = rows[torch.argsort(columns["episode"][rows], stable=True)]
+            derived[name + "s"], derived[name + "_steps"] = rows, step[rows]
+        return derived
+
+    @property
+    def has_positives(self) -> bool:
+        """Whether a stored episode has positive states (the finetuning's stage 2)."""
+        return self._positive_episodes > 0
+
+    @property
+    def valid(self) -> torch.Tensor:
+        """Per storage row: whether it belongs to an episode still stored whole."""
+        return self._valid
+
+    @property
+    def num_permanent_episodes(self) -> int:
+        return min(self._next_episode, self.permanent_episodes)
+
+    def state_dict(self) -> dict[str, Any]:
+        first = torch.tensor([first for first, _ in self.episodes.values()], dtype=torch.int64)
+        return {"cursor": self._cursor, "permanent_rows": self._permanent_rows,
+                "next_episode": self._next_episode, "write_count": self._write_count,
+                "positive_episodes": self._positive_episodes, "valid": self._valid.clone(),
+                "episode_ids": torch.tensor(list(self.episodes), dtype=torch.int64),
+                "episode_first": first,
+                "episode_length": torch.tensor([n for _, n in self.episodes.values()],
+                                               dtype=torch.int64),
+                "keys": sorted(self._keys) if self._keys is not None else None}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        self._cursor = state_dict["cursor"]
+        self._permanent_rows = state_dict["permanent_rows"]
+        self._next_episode = state_dict["next_episode"]
+        self._write_count = state_dict["write_count"]
+        self._positive_episodes = state_dict["positive_episodes"]
+        self._valid = state_dict["valid"].clone()
+        self.episodes = {int(i): (int(f), int(n)) for i, f, n in zip(
+            state_dict["episode_ids"], state_dict["episode_first"],
+            state_dict["episode_length"], strict=True)}
+        self._keys = set(state_dict["keys"]) if state_dict["keys"] is not None else None
+        self.version += 1
+        self._derived = None
+
+    def dumps(self, path: str | Path) -> None:
+        path = Path(path)
+        path.mkdir(parents=True, exist_ok=True)
+        torch.save(self.state_dict(), path / "episode_writer.pt")
+
+    def loads(self, path: str | Path) -> None:
+        self.load_state_dict(torch.load(Path(path) / "episode_writer.pt", weights_only=True))
+
+
+def _draw(candidates: torch.Tensor, batch_size: int, what: str) -> torch.Tensor:
+    if candidates.numel() == 0:
+        raise RuntimeError(f"no {what} stored yet: insert episodes before sampling.")
+    return torch.randint(candidates.numel(), (batch_size,))
+
+
+def _window_rows(rows: torch.Tensor, step: torch.Tensor, window_length: int) -> torch.Tensor:
+    """Rows ``rows - min(step, K - 1 - j)``, j = 0 .. K - 1: the window ending at each row,
+    never before its episode's first row (``[..., K]``)."""
+    offsets = torch.arange(window_length - 1, -1, -1, device=rows.device)
+    return rows.unsqueeze(-1) - torch.minimum(offsets, step.unsqueeze(-1))
+
+
+def state_index(rows: torch.Tensor, step: torch.Tensor, history: int,
+                window_length: int | None = None) -> torch.Tensor:
+    """The rows a state needs, ``[..., 3 (+ K)]``: ``[s_t, s_0, s_{t-k}, window...]``."""
+    columns = [rows, rows - step, rows - torch.clamp(step, max=history)]
+    index = torch.stack(columns, -1)
+    if window_length:
+        index = torch.cat([index, _window_rows(rows, step, window_length)], -1)
+    return index
+
+
+def transition_index(rows: torch.Tensor, step: torch.Tensor, history: int,
+                     window_length: int | None = None) -> torch.Tensor:
+    """The rows a transition from state ``t`` needs, ``[..., 4 (+ K)]``:
+    ``[t, t + 1, s_0, s_{t+1-k}, window of s_{t+1}...]``."""
+    following = rows + 1
+    columns = [rows, following, rows - step, following - torch.clamp(step + 1, max=history)]
+    index = torch.stack(columns, -1)
+    if window_length:
+        index = torch.cat([index, _window_rows(following, step + 1, window_length)], -1)
+    return index
+
+
+class _EpisodeRowSampler(Sampler):
+    """Shared by the two samplers: they read the :class:`EpisodeWriter`'s row sets."""
+
+    def __init__(self, writer: EpisodeWriter, history: int, window_length: int | None) -> None:
         if history < 1:
             raise ValueError(f"history={history} must be >= 1 (k, the embedding offset).")
         if window_length is not None and (isinstance(window_length, bool)
@@ -122,283 +379,280 @@ class EpisodeReplayBuffer:
                                           or window_length < 2):
             raise ValueError(f"window_length={window_length!r}; expected None or an integer "
                              ">= 2 (the K embeddings s_(t-K+1) .. s_t).")
-        self.capacity = capacity
+        self.writer = writer
         self.history = history
         self.window_length = window_length
-        self.embedding_dtype = embedding_dtype
+
+    def _empty(self) -> None:
+        pass
+
+    def state_dict(self) -> dict[str, Any]:
+        return {}  # everything is derived from the writer
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        pass
+
+    def dumps(self, path: str | Path) -> None:
+        pass
+
+    def loads(self, path: str | Path) -> None:
+        pass
+
+
+class TransitionSampler(_EpisodeRowSampler):
+    """Transitions drawn uniformly (with replacement) over the valid rows, starts included.
+
+    Returns for each the storage rows ``[t, t + 1, s_0, s_{t+1-k}, window...]``
+    (:func:`transition_index`), never outside the transition's episode; :class:`TransitionLayout`
+    reads them.
+
+    Args:
+        writer: the buffer's :class:`EpisodeWriter`.
+        history: ``k``, the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3).
+        window_length: K: also the rows of the last K embeddings (d_sequence); None: none.
+    """
+
+    def sample(self, storage: Storage, batch_size: int) -> tuple[torch.Tensor, dict]:
+        rows = self.writer.rows()
+        pick = _draw(rows["transitions"], batch_size, "transitions")
+        index = transition_index(rows["transitions"][pick], rows["steps"][pick], self.history,
+                                 self.window_length)
+        return index, {}
+
+
+class FinetuningSampler(_EpisodeRowSampler):
+    """The reward-finetuning batch's states, from the same storage as SAC's transitions.
+
+    Groups (:meth:`groups`, stacked in this order, ``batch_size`` states each): ``negative``
+    (when any negative state is stored); once a positive episode is stored (stage 2)
+    ``positive`` and, when some positive run is longer than ``gap``, ``positive_pair``: states
+    ``s_i`` and ``s_{i-gap}`` of one positive episode (both positive: positives run from step 1,
+    so ``i - gap >= 1`` keeps both in the same positive run). Each state comes with the rows of
+    its history (:func:`state_index`); :class:`FinetuningLayout` names the groups.
+
+    Args:
+        writer, history, window_length: as :class:`TransitionSampler`.
+        gap: the positive pairs' lag (``reward.gap``).
+        label_window: positives and negatives are drawn from the most recent ``label_window``
+            labelled states of each kind (FuRL's two FIFO buffers of 20,000 embeddings); None:
+            all of them.
+    """
+
+    def __init__(self, writer: EpisodeWriter, history: int, window_length: int | None, *,
+                 gap: int = 10, label_window: int | None = 20_000) -> None:
+        super().__init__(writer, history, window_length)
+        if gap < 1:
+            raise ValueError(f"gap={gap} must be >= 1 (the positive pairs' lag).")
+        self.gap = gap
         self.label_window = label_window
-        self._storage = LazyTensorStorage(capacity)
-        self._cursor = 0
-        self._next_episode = 0
-        # episode id -> (first row, number of rows); only episodes still readable are kept.
-        self._episodes: dict[int, tuple[int, int]] = {}
-        self._positive_episodes = 0
-        self._permanent_episodes = 0
-        self._permanent_rows = 0
-        self._refresh_indices()
+        self._version, self._candidates = -1, {}
 
-    # ------------------------------------------------------------------ writing
-    def episode_rows(self, episode: TensorDictBase) -> TensorDict:
-        """The ``T + 1`` compact rows of an episode given in ``env.rollout()`` layout ``[T]``."""
-        if episode.ndim != 1 or episode.shape[0] < 1:
-            raise ValueError(f"episode has batch shape {tuple(episode.shape)}; expected one "
-                             "unbatched episode [T] with T >= 1 (split batched rollouts first).")
-        steps = episode.shape[0]
-        rows = {}
-        for key in _STATE_KEYS:
-            if key in episode.keys():
-                states = torch.cat([episode[key][:1], episode["next", key]], 0)
-                rows[key] = states.to(self.embedding_dtype if key == "embedding"
-                                      else torch.float32)
-        action = episode["action"].float()
-        rows["action"] = torch.cat([action, torch.zeros_like(action[:1])], 0)
-        next_success = episode["next", "success"].reshape(steps, 1).bool()
-        first_success = (episode["success"][:1].reshape(1, 1).bool() if "success" in
-                         episode.keys() else torch.zeros(1, 1, dtype=torch.bool))
-        rows["success"] = torch.cat([first_success, next_success], 0)
-        terminated = episode.get(("next", "terminated"), torch.zeros(steps, 1, dtype=torch.bool))
-        rows["terminated"] = torch.cat([torch.zeros(1, 1, dtype=torch.bool),
-                                        terminated.reshape(steps, 1).bool()], 0)
-        labels = episode_labels(next_success)
-        rows["label"] = torch.cat([torch.full((1,), UNLABELLED, dtype=torch.int8), labels], 0)
-        rows["step"] = torch.arange(steps + 1, dtype=torch.int32)
-        last = torch.zeros(steps + 1, dtype=torch.bool)
-        last[-1] = True
-        rows["last"] = last
-        return TensorDict(rows, [steps + 1])
+    def candidates(self) -> dict[str, torch.Tensor]:
+        """Rows and steps of each group's candidates (cached per write)."""
+        if self._version != self.writer.version:
+            rows, candidates = self.writer.rows(), {}
+            for name in ("positive", "negative"):
+                recent = slice(-self.label_window, None) if self.label_window else slice(None)
+                candidates[name] = rows[name + "s"][recent]
+                candidates[name + "_steps"] = rows[name + "_steps"][recent]
+            later = candidates["positive_steps"] > self.gap
+            candidates["pair"] = candidates["positive"][later]
+            candidates["pair_steps"] = candidates["positive_steps"][later]
+            self._version, self._candidates = self.writer.version, candidates
+        return self._candidates
 
-    def extend(self, episode: TensorDictBase, *, permanent: bool = False) -> TensorDict:
-        """Insert one ended episode (``env.rollout()`` layout ``[T]``, pixels ignored).
+    def groups(self) -> tuple[str, ...]:
+        """The groups a batch holds now (a subset of :data:`FINETUNING_GROUPS`, in order)."""
+        candidates = self.candidates()
+        present = {"negative": candidates["negative"].numel() > 0,
+                   "positive": self.writer.has_positives and candidates["positive"].numel() > 0}
+        present["positive_pair"] = present["positive"] and candidates["pair"].numel() > 0
+        return tuple(name for name in FINETUNING_GROUPS if present[name])
 
-        Returns its compact rows, which :meth:`extend_rows` accepts (e.g. to rebuild the buffer
-        from saved episodes when a run resumes). ``permanent``: never overwritten (see the
-        module docstring); only before any other episode.
-        """
-        rows = self.episode_rows(episode)
-        self.extend_rows(rows, permanent=permanent)
-        return rows
+    def sample(self, storage: Storage, batch_size: int) -> tuple[torch.Tensor, dict]:
+        candidates, groups = self.candidates(), self.groups()
+        if not groups:
+            raise RuntimeError("no labelled states stored yet: insert episodes before sampling.")
+        anchors, steps = [], []
+        for name in groups:
+            source = "pair" if name == "positive_pair" else name
+            pick = _draw(candidates[source], batch_size, f"{name} states")
+            anchors.append(candidates[source][pick])
+            steps.append(candidates[source + "_steps"][pick])
+            if name == "positive_pair":
+                anchors.append(anchors[-1] - self.gap)
+                steps.append(steps[-1] - self.gap)
+        index = state_index(torch.stack(anchors), torch.stack(steps), self.history,
+                            self.window_length)
+        return index, {"groups": groups}
 
-    def extend_rows(self, rows: TensorDictBase, *, permanent: bool = False) -> int:
-        """Insert the compact rows of one episode; returns its episode id."""
-        length = rows.shape[0]
-        if permanent and self._next_episode > self._permanent_episodes:
-            raise ValueError("permanent episodes must be inserted before any other episode "
-                             "(they sit at the start of the storage, outside the ring).")
-        free = self.capacity - self._permanent_rows
-        if length > free:
-            raise ValueError(f"an episode of {length} rows does not fit in capacity="
-                             f"{self.capacity} ({self._permanent_rows} rows hold permanent "
-                             "episodes); raise the buffer capacity.")
-        if self._storage.initialized:
-            stored = set(self._storage._storage.keys()) - {"episode", "valid"}
-            if set(rows.keys()) != stored:
-                raise ValueError(
-                    f"an episode with keys {sorted(rows.keys())} does not match the buffer's "
-                    f"{sorted(stored)}; every episode must carry the same keys (embed all of "
-                    "them with the same encoder, or none of them).")
-        if permanent and self._cursor + length > self.capacity:
-            raise ValueError(f"permanent episodes fill more than capacity={self.capacity} rows; "
-                             "raise the buffer capacity.")
-        start = (self._cursor if self._cursor + length <= self.capacity
-                 else self._permanent_rows)
-        self._invalidate_overlapping(start, start + length)
-        episode_id = self._next_episode
-        rows = rows.clone(False)
-        rows["episode"] = torch.full((length,), episode_id, dtype=torch.int64)
-        rows["valid"] = torch.ones(length, dtype=torch.bool)
-        first_write = not self._storage.initialized
-        self._storage.set(torch.arange(start, start + length), rows)
-        if first_write:
-            # The lazily allocated storage is uninitialised memory: only written rows are valid.
-            self._column("valid")[start + length:] = False
-        self._episodes[episode_id] = (start, length)
-        self._positive_episodes += bool((rows["label"] == POSITIVE).any())
-        self._next_episode += 1
-        self._cursor = start + length
-        if permanent:
-            self._permanent_episodes += 1
-            self._permanent_rows = self._cursor
-        self._refresh_indices()
-        return episode_id
 
-    def _invalidate_overlapping(self, start: int, stop: int) -> None:
-        # Whole episodes go, so no index arithmetic can reach into a newer episode.
-        for episode_id, (first, length) in list(self._episodes.items()):
-            if first < stop and start < first + length:
-                self._column("valid")[first:first + length] = False
-                if bool((self._column("label")[first:first + length] == POSITIVE).any()):
-                    self._positive_episodes -= 1
-                del self._episodes[episode_id]
+def _embeddings(rows: TensorDictBase, columns: slice | int) -> torch.Tensor:
+    return rows["embedding"][..., columns, :].float()
 
-    def _column(self, key: str) -> torch.Tensor:
-        # The storage's TensorDict, read column by column: gathering a few keys for a batch is
-        # much cheaper than ``storage.get(index)``, which gathers every key.
-        return self._storage._storage.get(key)
 
-    def _refresh_indices(self) -> None:
-        """Recompute the sampleable index sets (once per inserted episode, never per sample)."""
-        empty = torch.zeros(0, dtype=torch.int64)
-        if not self._episodes:
-            self._transitions = self._positives = self._negatives = empty
-            return
-        valid = self._column("valid")
-        self._transitions = torch.nonzero(valid & ~self._column("last")).reshape(-1)
-        label = self._column("label")
-        self._positives = self._recent(torch.nonzero(valid & (label == POSITIVE)).reshape(-1))
-        self._negatives = self._recent(torch.nonzero(valid & (label == NEGATIVE)).reshape(-1))
+class TransitionLayout(Transform):
+    """Rows ``[B, 4 (+ K)]`` from :class:`TransitionSampler` -> SAC transitions ``[B]``.
 
-    def _recent(self, rows: torch.Tensor) -> torch.Tensor:
-        if self.label_window is None or rows.numel() <= self.label_window:
-            return rows
-        order = torch.argsort(self._column("episode")[rows], stable=True)
-        return rows[order[-self.label_window:]]
+    Keys: ``observation``, ``action``, ``step``, ``episode`` and under ``"next"``:
+    ``observation``, ``embedding`` (s_{t+1}), ``initial_embedding`` (s_0),
+    ``previous_embedding`` (s_{t+1-k}, s_0 when ``t+1-k <= 0``), with ``window_length``
+    ``embedding_window`` (s_{t+2-K} .. s_{t+1}, padded with s_0), ``success``, ``terminated``,
+    ``truncated``, ``done`` and ``reward`` (the sparse task reward ``success_{t+1} - 1``, which a
+    :class:`~temporal_torchrl.transforms.TemporalRewardTransform` after this one overwrites).
+    Embeddings are returned in ``float32``.
+    """
 
-    # ------------------------------------------------------------------ reading
+    def __init__(self, window_length: int | None = None) -> None:
+        super().__init__()
+        self.window_length = window_length
+
+    def forward(self, rows: TensorDictBase) -> TensorDictBase:
+        success = rows["success"][:, 1]
+        terminated = rows["terminated"][:, 1]
+        truncated = rows["last"][:, 1].unsqueeze(-1)
+        following = {"success": success, "terminated": terminated, "truncated": truncated,
+                     "done": terminated | truncated, "reward": success.float() - 1.0}
+        batch = {"action": rows["action"][:, 0], "step": rows["step"][:, 0].long(),
+                 "episode": rows["episode"][:, 0]}
+        if "observation" in rows.keys():
+            batch["observation"] = rows["observation"][:, 0]
+            following["observation"] = rows["observation"][:, 1]
+        if "embedding" in rows.keys():
+            embeddings = _embeddings(rows, slice(1, None))
+            following["embedding"] = embeddings[:, 0]
+            following["initial_embedding"] = embeddings[:, 1]
+            following["previous_embedding"] = embeddings[:, 2]
+            if self.window_length:
+                following["embedding_window"] = embeddings[:, 3:]
+        batch["next"] = following
+        return TensorDict(batch, rows.shape[:1], device=rows.device)
+
+
+class FinetuningLayout(Transform):
+    """Rows ``[G, B, 3 (+ K)]`` from :class:`FinetuningSampler` -> the finetuning batch ``[B]``.
+
+    Sub-TensorDicts ``"negative"``, ``"positive"`` (states) and ``"positive_pair"`` (``"later"``
+    s_i and ``"earlier"`` s_{i-gap}), those the sampler drew (``groups``, the sampler's
+    :meth:`FinetuningSampler.groups`: the same answer as when it sampled, both read from the
+    writer). Each state has ``embedding`` (s_t), ``initial_embedding`` (s_0),
+    ``previous_embedding`` (s_{t-k}, clamped to s_0), with ``window_length`` ``embedding_window``
+    (s_{t-K+1} .. s_t, padded with s_0), ``label``, ``step`` and ``episode``.
+    """
+
+    def __init__(self, groups: Callable[[], tuple[str, ...]],
+                 window_length: int | None = None) -> None:
+        super().__init__()
+        self.groups = groups
+        self.window_length = window_length
+
+    def _states(self, rows: TensorDictBase) -> TensorDict:
+        embeddings = _embeddings(rows, slice(None))
+        states = {"embedding": embeddings[:, 0], "initial_embedding": embeddings[:, 1],
+                  "previous_embedding": embeddings[:, 2], "label": rows["label"][:, 0],
+                  "step": rows["step"][:, 0].long(), "episode": rows["episode"][:, 0]}
+        if self.window_length:
+            states["embedding_window"] = embeddings[:, 3:]
+        return TensorDict(states, rows.shape[:1], device=rows.device)
+
+    def forward(self, rows: TensorDictBase) -> TensorDictBase:
+        batch = TensorDict({}, rows.shape[1:2], device=rows.device)
+        group = iter(range(rows.shape[0]))
+        for name in self.groups():
+            if name == "positive_pair":
+                batch[name] = TensorDict({"later": self._states(rows[next(group)]),
+                                          "earlier": self._states(rows[next(group)])},
+                                         rows.shape[1:2])
+            else:
+                batch[name] = self._states(rows[next(group)])
+        return batch
+
+
+class EpisodeReplayBuffer(ReplayBuffer):
+    """TorchRL :class:`~torchrl.data.ReplayBuffer` of whole episodes (see the module doc).
+
+    ``extend`` takes the rows of one ended episode (:func:`episode_rows`); ``sample`` returns
+    SAC transitions with their histories, relabelled by ``reward`` (the heads as they are at
+    sampling time) when one is given; ``finetuning.sample`` returns the reward-finetuning batch
+    from the same storage.
+
+    Args:
+        capacity: number of stored rows; an episode of ``T`` transitions takes ``T + 1`` rows
+            (one per state), so 500 transitions per episode use 0.2 % more than ``T`` rows.
+        history: ``k``, the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3).
+        window_length: K (>= 2): batches also carry ``"embedding_window"``, the last K
+            embeddings of each state (the reward's ``window_length``; None: no window).
+        label_window, gap: the finetuning sampler's (:class:`FinetuningSampler`).
+        permanent_episodes: how many of the first inserted episodes are never overwritten
+            (stage 2's preloaded experts).
+        reward: relabels SAC batches (a :class:`~temporal_torchrl.rewards.TemporalReward`);
+            None: batches keep the sparse task reward.
+        batch_size, finetuning_batch_size: default batch sizes of ``sample`` and
+            ``finetuning.sample``.
+        device: where the storage lives (and batches are returned).
+    """
+
+    def __init__(self, capacity: int, *, history: int = 5, window_length: int | None = None,
+                 label_window: int | None = 20_000, gap: int = 10, permanent_episodes: int = 0,
+                 reward: torch.nn.Module | None = None, batch_size: int | None = None,
+                 finetuning_batch_size: int | None = None,
+                 device: torch.device | str = "cpu") -> None:
+        from temporal_torchrl.transforms.reward import TemporalRewardTransform
+
+        if capacity < 2:
+            raise ValueError(f"capacity={capacity} must be >= 2 rows (one episode of one step).")
+        storage = LazyTensorStorage(capacity, device=device)
+        writer = EpisodeWriter(permanent_episodes)
+        transforms = [TransitionLayout(window_length)]
+        if reward is not None:
+            transforms.append(TemporalRewardTransform(reward))
+        super().__init__(storage=storage, writer=writer,
+                         sampler=TransitionSampler(writer, history, window_length),
+                         transform=Compose(*transforms), batch_size=batch_size)
+        finetuning_sampler = FinetuningSampler(writer, history, window_length, gap=gap,
+                                               label_window=label_window)
+        self.finetuning = ReplayBuffer(
+            storage=storage, writer=ImmutableDatasetWriter(), sampler=finetuning_sampler,
+            transform=FinetuningLayout(finetuning_sampler.groups, window_length),
+            batch_size=finetuning_batch_size)
+        self.history = history
+        self.window_length = window_length
+
+    @property
+    def capacity(self) -> int:
+        return self.storage.max_size
+
     @property
     def num_transitions(self) -> int:
         """Number of transitions that can be sampled."""
-        return int(self._transitions.numel())
+        return int(self.writer.rows()["transitions"].numel())
 
     @property
     def num_episodes(self) -> int:
         """Number of episodes still stored whole."""
-        return len(self._episodes)
+        return len(self.writer.episodes)
 
     @property
     def num_positive_states(self) -> int:
         """Number of positive states finetuning samples from (within ``label_window``)."""
-        return int(self._positives.numel())
+        return int(self.finetuning.sampler.candidates()["positive"].numel())
 
     @property
     def num_permanent_episodes(self) -> int:
-        """Number of permanent episodes (never overwritten)."""
-        return self._permanent_episodes
+        return self.writer.num_permanent_episodes
 
     @property
     def has_positives(self) -> bool:
-        """Whether a stored episode has positive steps (the finetuning's stage 2)."""
-        return self._positive_episodes > 0
-
-    def __len__(self) -> int:
-        return self.num_transitions
-
-    def _embedding(self, rows: torch.Tensor) -> torch.Tensor:
-        return self._column("embedding")[rows].float()
-
-    def _has(self, key: str) -> bool:
-        return bool(self._episodes) and key in self._storage._storage.keys()
-
-    def _window(self, rows: torch.Tensor, step: torch.Tensor) -> torch.Tensor:
-        """The embeddings of rows ``rows - min(step, K - 1 - j)``, j = 0 .. K - 1: ``[B, K, D]``,
-        the window ending at each row, never before its episode's first row."""
-        offsets = torch.arange(self.window_length - 1, -1, -1)
-        return self._embedding(rows.unsqueeze(-1) - torch.minimum(offsets, step.unsqueeze(-1)))
-
-    def transitions_at(self, rows: torch.Tensor) -> TensorDict:
-        """SAC transitions starting at storage ``rows`` (each row a state ``t`` with ``t < T``).
-
-        Keys: ``observation``, ``action``, ``step``, ``episode`` and under ``"next"``:
-        ``observation``, ``embedding`` (s_{t+1}), ``initial_embedding`` (s_0),
-        ``previous_embedding`` (s_{t+1-k}, s_0 when ``t+1-k <= 0``), with ``window_length``
-        ``embedding_window`` (s_{t+2-K} .. s_{t+1}, padded with s_0), ``success``,
-        ``terminated``, ``truncated``, ``done`` and ``reward`` (the sparse task reward
-        ``success_{t+1} - 1``, to be overwritten by the reward transform).
-        """
-        step = self._column("step")[rows].long()
-        following = rows + 1
-        success = self._column("success")[following]
-        terminated = self._column("terminated")[following]
-        truncated = self._column("last")[following].unsqueeze(-1)
-        nxt = {"success": success, "terminated": terminated, "truncated": truncated,
-               "done": terminated | truncated, "reward": success.float() - 1.0}
-        batch = {"action": self._column("action")[rows], "step": step,
-                 "episode": self._column("episode")[rows]}
-        if self._has("observation"):
-            batch["observation"] = self._column("observation")[rows]
-            nxt["observation"] = self._column("observation")[following]
-        if self._has("embedding"):
-            nxt["embedding"] = self._embedding(following)
-            nxt["initial_embedding"] = self._embedding(rows - step)
-            nxt["previous_embedding"] = self._embedding(
-                following - torch.clamp(step + 1, max=self.history))
-            if self.window_length:
-                nxt["embedding_window"] = self._window(following, step + 1)
-        batch["next"] = nxt
-        return TensorDict(batch, [rows.shape[0]])
-
-    def states_at(self, rows: torch.Tensor) -> TensorDict:
-        """Embedding states at storage ``rows`` with their history, label, step and episode.
-
-        Keys: ``embedding`` (s_t), ``initial_embedding`` (s_0), ``previous_embedding``
-        (s_{t-k}, clamped to s_0), with ``window_length`` ``embedding_window``
-        (s_{t-K+1} .. s_t, padded with s_0), ``label``, ``step``, ``episode``.
-        """
-        step = self._column("step")[rows].long()
-        states = TensorDict({
-            "embedding": self._embedding(rows),
-            "initial_embedding": self._embedding(rows - step),
-            "previous_embedding": self._embedding(rows - torch.clamp(step, max=self.history)),
-            "label": self._column("label")[rows],
-            "step": step,
-            "episode": self._column("episode")[rows],
-        }, [rows.shape[0]])
-        if self.window_length:
-            states["embedding_window"] = self._window(rows, step)
-        return states
-
-    @staticmethod
-    def _draw(candidates: torch.Tensor, batch_size: int, what: str) -> torch.Tensor:
-        if candidates.numel() == 0:
-            raise RuntimeError(f"no {what} stored yet: insert episodes before sampling.")
-        return candidates[torch.randint(candidates.numel(), (batch_size,))]
-
-    def sample(self, batch_size: int) -> TensorDict:
-        """``batch_size`` transitions drawn uniformly (with replacement), starts included."""
-        return self.transitions_at(self._draw(self._transitions, batch_size, "transitions"))
-
-    def sample_states(self, batch_size: int, label: int) -> TensorDict:
-        """States with ``label`` (``POSITIVE`` or ``NEGATIVE``) and their histories."""
-        candidates = self._positives if label == POSITIVE else self._negatives
-        name = "positive states" if label == POSITIVE else "negative states"
-        return self.states_at(self._draw(candidates, batch_size, name))
-
-    def sample_positive_pairs(self, batch_size: int, gap: int = 10) -> TensorDict | None:
-        """Pairs ``(s_i, s_{i-gap})`` from one positive episode (both positive), or ``None``.
-
-        Returns a TensorDict with sub-TensorDicts ``"later"`` (s_i) and ``"earlier"``
-        (s_{i-gap}); positives run from step 1 (s_0 is unlabelled), so ``i - gap >= 1`` keeps
-        both in the same positive run.
-        """
-        candidates = self._positives[self._column("step")[self._positives] > gap]
-        if candidates.numel() == 0:
-            return None
-        later = self._draw(candidates, batch_size, "positive pairs")
-        return TensorDict({"later": self.states_at(later),
-                           "earlier": self.states_at(later - gap)}, [batch_size])
-
-    def sample_finetuning(self, batch_size: int, gap: int = 10) -> TensorDict:
-        """One batch for the reward-finetuning losses.
-
-        Always ``"negative"`` states (when any are stored); once a positive episode is stored
-        (stage 2) also ``"positive"`` states and, when some positive run is longer than
-        ``gap``, ``"positive_pair"`` (see :meth:`sample_positive_pairs`).
-        """
-        batch = TensorDict({}, [batch_size])
-        if self._negatives.numel():
-            batch["negative"] = self.sample_states(batch_size, NEGATIVE)
-        if self.has_positives and self._positives.numel():
-            batch["positive"] = self.sample_states(batch_size, POSITIVE)
-            pairs = self.sample_positive_pairs(batch_size, gap)
-            if pairs is not None:
-                batch["positive_pair"] = pairs
-        return batch
+        """Whether a stored episode has positive states (the finetuning's stage 2)."""
+        return self.writer.has_positives
 
     def memory_bytes(self) -> int:
-        """Bytes held by the stored rows and the cached index sets."""
+        """Bytes held by the stored rows and the writer's bookkeeping."""
         stored = 0
-        if self._episodes:
-            stored = sum(t.numel() * t.element_size()
-                         for t in self._storage._storage.values(include_nested=True,
-                                                                leaves_only=True))
-        cached = (self._transitions, self._positives, self._negatives)
-        return stored + sum(t.numel() * t.element_size() for t in cached)
+        if self.writer.episodes:
+            stored = sum(t.numel() * t.element_size() for t in self.storage.get(slice(None))
+                         .values(include_nested=True, leaves_only=True))
+            # ``get`` views the written rows; the storage holds ``capacity`` of them.
+            stored = stored * self.capacity // len(self.storage)
+        bookkeeping = [self.writer.valid, *self.writer.rows().values()]
+        return stored + sum(t.numel() * t.element_size() for t in bookkeeping)

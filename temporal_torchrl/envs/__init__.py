@@ -1,4 +1,5 @@
-"""Fixed-goal Metaworld tasks as TorchRL envs, the task registry and scripted experts."""
+"""Fixed-goal Metaworld tasks as TorchRL envs, the task registry, scripted experts, and the
+canonical temporal env composition."""
 
 from temporal_torchrl.envs.experts import collect_expert_episodes, first_success_index
 from temporal_torchrl.envs.metaworld_env import MetaworldEnv, make_env
@@ -9,15 +10,27 @@ from temporal_torchrl.envs.tasks import (
     TaskSpec,
     get_task,
 )
+from temporal_torchrl.envs.temporal import (
+    EXPERT_MAX_STEPS,
+    baseline_text,
+    collect_successful_experts,
+    make_temporal_env,
+    make_temporal_reward,
+)
 
 __all__ = [
     "EVALUATION_TASKS",
+    "EXPERT_MAX_STEPS",
     "GENERIC_BASELINE",
     "TASKS",
     "MetaworldEnv",
     "TaskSpec",
+    "baseline_text",
+    "collect_successful_experts",
     "collect_expert_episodes",
     "first_success_index",
     "get_task",
     "make_env",
+    "make_temporal_env",
+    "make_temporal_reward",
 ]

@@ -1,11 +1,9 @@
 """Offline finetuning of a reward's heads with the package's own losses and replay buffer.
 
 The training episodes go into an :class:`~temporal_torchrl.data.EpisodeReplayBuffer`, labelled
-by the training run's rule, and each update draws one batch with
-:meth:`~temporal_torchrl.data.EpisodeReplayBuffer.sample_finetuning` and takes one Adam step on
-each loss of :func:`~temporal_torchrl.objectives.finetuning_losses`, as one reward-head update of
-``recipes/sac_temporal.py`` does. What differs from training is only where the episodes come
-from: a fixed offline set instead of the agent's own.
+by the training run's rule, and a :class:`~temporal_torchrl.training.RewardHeadTrainer` on its
+finetuning view takes the updates, as in ``recipes/sac_temporal.py``. What differs from training
+is only where the episodes come from: a fixed offline set instead of the agent's own.
 """
 
 from __future__ import annotations
@@ -16,9 +14,10 @@ import torch
 from tensordict import TensorDictBase
 from torch import Tensor
 
-from temporal_torchrl.data import EpisodeReplayBuffer
-from temporal_torchrl.objectives import HEADS_LEARNING_RATE, finetuning_losses
+from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
+from temporal_torchrl.objectives import HEADS_LEARNING_RATE
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.training import RewardHeadTrainer
 
 #: Finetuning stages (thesis 3.1.3): 1 from failed episodes only, 2 with successful ones too.
 STAGES = (1, 2)
@@ -26,7 +25,7 @@ STAGES = (1, 2)
 
 def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2,
                            history: int = 5, label_window: int | None = 20_000,
-                           window_length: int | None = None,
+                           window_length: int | None = None, gap: int = 10,
                            embedding_dtype: torch.dtype = torch.float16) -> EpisodeReplayBuffer:
     """A replay buffer holding the training episodes the finetuning losses sample from.
 
@@ -36,9 +35,9 @@ def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2
     Args:
         episodes: embedded episodes in ``env.rollout()`` layout.
         stage: 1 or 2 (:data:`STAGES`).
-        history, label_window, window_length, embedding_dtype: as the training run's buffer
-            (``reward.k``, ``reward.label_window``, the reward's ``window_length`` when it reads
-            a window, ``replay_buffer.embedding_dtype``).
+        history, label_window, window_length, gap, embedding_dtype: as the training run's
+            buffer (``reward.k``, ``reward.label_window``, the reward's ``window_length`` when
+            it reads a window, ``reward.gap``, ``replay_buffer.embedding_dtype``).
     """
     if stage not in STAGES:
         raise ValueError(f"stage={stage!r}; expected 1 (failed episodes only) or 2 (successful "
@@ -49,22 +48,21 @@ def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2
         raise ValueError("no episodes to finetune on; the training part needs failed episodes "
                          "(stage 1) or any episodes (stage 2).")
     buffer = EpisodeReplayBuffer(sum(len(episode) + 1 for episode in episodes), history=history,
-                                 embedding_dtype=embedding_dtype, label_window=label_window,
-                                 window_length=window_length)
+                                 label_window=label_window, window_length=window_length, gap=gap)
     for episode in episodes:
-        buffer.extend(episode)
+        buffer.extend(episode_rows(episode, embedding_dtype=embedding_dtype))
     return buffer
 
 
 def finetune_reward(reward: TemporalReward, buffer: EpisodeReplayBuffer,
                     goal_image_embedding: Tensor, *, updates: int, batch_size: int = 256,
-                    gap: int = 10, lr: float = HEADS_LEARNING_RATE, delta: float = 0.1,
+                    lr: float = HEADS_LEARNING_RATE, delta: float = 0.1,
                     l2_margin: float = 0.2, same_position: bool = True) -> dict[str, float]:
     """Train ``reward``'s heads in place for ``updates`` batches; returns the final losses.
 
-    The losses are the training recipe's: one per part with heads, by the part's registered
-    objective (:func:`~temporal_torchrl.objectives.finetuning_losses`: ranking, directional or
-    certainty), each with its own Adam optimizer over its heads; all read the same batch.
+    The updates are the training recipe's (:class:`~temporal_torchrl.training.RewardHeadTrainer`:
+    one loss per part with heads, by the part's registered objective, each with its own Adam
+    optimizer; all read the same batch).
 
     Args:
         reward: the reward whose heads are trained.
@@ -73,8 +71,8 @@ def finetune_reward(reward: TemporalReward, buffer: EpisodeReplayBuffer,
         goal_image_embedding: s_g, the first success state of a training expert episode
             (:func:`~temporal_torchrl.data.goal_image_embedding`).
         updates: number of batches (>= 0).
-        batch_size, gap, lr, delta, l2_margin, same_position: the training recipe's
-            ``reward.*`` settings of the same names.
+        batch_size, lr, delta, l2_margin, same_position: the training recipe's
+            ``reward.*`` settings of the same names (``reward.gap`` is the buffer's).
 
     Returns:
         The mean of each loss over the last ``min(100, updates)`` updates, by loss key
@@ -82,19 +80,13 @@ def finetune_reward(reward: TemporalReward, buffer: EpisodeReplayBuffer,
     """
     if isinstance(updates, bool) or not isinstance(updates, int) or updates < 0:
         raise ValueError(f"updates={updates!r}; expected an integer >= 0.")
-    losses = finetuning_losses(reward, goal_image_embedding, delta=delta, l2_margin=l2_margin,
-                               same_position=same_position)
-    # Fused Adam: the training recipe's optimizer (the same update, faster on a CPU).
-    optimizers = [torch.optim.Adam(loss.parameters(), lr=lr, fused=True) for loss in losses]
-    recent: dict[str, list[float]] = {loss.loss_key: [] for loss in losses}
+    trainer = RewardHeadTrainer(reward, goal_image_embedding, buffer.finetuning,
+                                batch_size=batch_size, lr=lr, delta=delta, l2_margin=l2_margin,
+                                same_position=same_position)
+    recent: dict[str, list[Tensor]] = {loss.loss_key: [] for loss in trainer.losses}
     for update in range(updates):
-        batch = buffer.sample_finetuning(batch_size, gap=gap)
-        for loss, optimizer in zip(losses, optimizers, strict=True):
-            value = loss(batch)[loss.loss_key]
-            if update >= updates - 100:
-                recent[loss.loss_key].append(float(value.detach()))
-            if value.requires_grad:
-                optimizer.zero_grad(set_to_none=True)
-                value.backward()
-                optimizer.step()
-    return {key: sum(values) / len(values) for key, values in recent.items() if values}
+        metrics = trainer.update()
+        if update >= updates - 100:
+            for key, values in recent.items():
+                values.append(metrics[key])
+    return {key: float(torch.stack(values).mean()) for key, values in recent.items() if values}

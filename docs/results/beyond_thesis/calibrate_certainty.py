@@ -53,7 +53,7 @@ def task_targets(cfg, encoder) -> dict[tuple[float, float], dict[str, float]]:
     generator = torch.Generator().manual_seed(cfg.env.seed)
     sums = {(beta, prior): dict.fromkeys(KINDS, 0.0) for beta in BANDWIDTHS for prior in PRIORS}
     for _ in range(BATCHES):
-        batch = buffer.sample_finetuning(cfg.reward.batch_size)
+        batch = buffer.finetuning.sample(cfg.reward.batch_size)
         positive, negative = batch["positive"], batch["negative"]
         positions = torch.cat([positive["embedding"], negative["embedding"]])
         directions = positions - torch.cat([positive["previous_embedding"],

@@ -89,7 +89,8 @@ def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
     train, successful, failed = data.train, data.successful, data.failed
     goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
-                                    history=cfg.reward.k, label_window=cfg.reward.label_window)
+                                    history=cfg.reward.k, label_window=cfg.reward.label_window,
+                                    gap=cfg.reward.gap)
     shapes = {}
     for label, variant, scaling in CONFIGURATIONS:
         torch.manual_seed(cfg.env.seed)
@@ -98,7 +99,7 @@ def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
                                 certainty_prior=cfg.reward.certainty_prior,
                                 certainty_scaling=scaling)
         finetune_reward(reward, buffer, goal_image, updates=cfg.finetune.updates,
-                        batch_size=cfg.reward.batch_size, gap=cfg.reward.gap, lr=cfg.reward.lr)
+                        batch_size=cfg.reward.batch_size, lr=cfg.reward.lr)
         shapes[label] = shape(reward, successful, failed)
         print(f"  {cfg.env.task} {label}: " + ", ".join(
             f"{key} {value:.2f}" for key, value in shapes[label].items()), flush=True)

@@ -103,13 +103,13 @@ def task_scores(cfg, encoder) -> dict[str, tuple[float, float]]:
     goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
                                     history=cfg.reward.k, label_window=cfg.reward.label_window,
-                                    window_length=cfg.reward.window)
+                                    window_length=cfg.reward.window, gap=cfg.reward.gap)
     scores = {}
     for name in ENCODERS:
         torch.manual_seed(cfg.env.seed)
         reward = sequence_reward(name, encoder.dim, texts[0], texts[1], cfg.reward.window)
         finetune_reward(reward, buffer, goal_image, updates=cfg.finetune.updates,
-                        batch_size=cfg.reward.batch_size, gap=cfg.reward.gap, lr=cfg.reward.lr)
+                        batch_size=cfg.reward.batch_size, lr=cfg.reward.lr)
         result = score_reward(reward, successful, failed)
         scores[name] = (result.direction_accuracy, result.auroc)
         print(f"  {cfg.env.task} {name}: direction accuracy {scores[name][0]:.3f}, AUROC "

@@ -1,0 +1,47 @@
+"""Training metrics between two log lines: means of update outputs, relabelled-reward statistics."""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.record.loggers import Logger
+
+
+class MetricWindow:
+    """Means of the training metrics since the last :meth:`flush` (losses, alpha, entropy,
+    reward statistics), kept as tensors so an update never waits on ``.item()``.
+
+    >>> window = MetricWindow()
+    >>> window.add("sac", TensorDict({"loss_actor": torch.tensor(1.0)}, []))
+    >>> window.add("sac", TensorDict({"loss_actor": torch.tensor(3.0)}, []))
+    >>> window.flush()
+    {'sac/loss_actor': 2.0}
+    """
+
+    def __init__(self) -> None:
+        self._values: dict[str, list[torch.Tensor]] = {}
+
+    def add(self, prefix: str, values: TensorDictBase) -> None:
+        for key, value in values.items():
+            self._values.setdefault(f"{prefix}/{key}", []).append(value.detach().float())
+
+    def flush(self) -> dict[str, float]:
+        means = {key: torch.stack(values).mean().item() for key, values in self._values.items()}
+        self._values.clear()
+        return means
+
+
+def reward_statistics(next_batch: TensorDictBase) -> TensorDict:
+    """Mean and std of the relabelled r_P and r_D in a SAC batch (empty without a VLM reward)."""
+    stats = {}
+    for key, name in (("positional_reward", "r_P"), ("directional_reward", "r_D")):
+        if key in next_batch.keys():
+            std, mean = torch.std_mean(next_batch[key])
+            stats[f"{name}_mean"], stats[f"{name}_std"] = mean, std
+    return TensorDict(stats, [])
+
+
+def log_metrics(logger: Logger | None, metrics: dict[str, float], step: int) -> None:
+    if logger is not None:
+        for key, value in metrics.items():
+            logger.log_scalar(key, value, step=step)

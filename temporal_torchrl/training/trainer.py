@@ -1,0 +1,96 @@
+"""Online finetuning of the reward heads (thesis 3.1.3 and 4.3.3): losses, optimizers, stage."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from tensordict import TensorDict
+from torch import Tensor
+from torchrl.data import ReplayBuffer
+
+from temporal_torchrl.objectives import HEADS_LEARNING_RATE, finetuning_losses
+from temporal_torchrl.rewards import TemporalReward
+
+
+class RewardHeadTrainer:
+    """Trains a :class:`~temporal_torchrl.rewards.TemporalReward`'s heads from replayed states.
+
+    Owns one loss per part with heads, by the part's registered objective
+    (:func:`~temporal_torchrl.objectives.finetuning_losses`: FuRL's ranking loss, the thesis's
+    directional loss, or the certainty loss), each with its own Adam optimizer over its heads.
+    Every :meth:`update` draws one batch from ``replay`` (an
+    :class:`~temporal_torchrl.data.EpisodeReplayBuffer`'s ``finetuning`` view: negatives, and
+    from stage 2 on positives and positive pairs) and takes one step on each loss. The losses
+    call the reward's own :meth:`~temporal_torchrl.rewards.TemporalReward.positional_reward` and
+    :meth:`~temporal_torchrl.rewards.TemporalReward.directional_reward`, the calls the env and
+    the relabelling make, so the heads are trained on the reward the agent receives.
+
+    Args:
+        reward: the reward whose heads are trained (in place).
+        goal_image_embedding: s_g ``[D]``, the first success state of an expert episode.
+        replay: the buffer the finetuning batches come from.
+        batch_size: states per group (``reward.batch_size``).
+        lr, delta, l2_margin, same_position: ``reward.lr``, and the losses' settings of the
+            same names.
+
+    Example:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
+        >>> D, T = 8, 20
+        >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl")
+        >>> buffer = EpisodeReplayBuffer(100, history=2)
+        >>> episode = TensorDict({"embedding": torch.randn(T, D), "action": torch.rand(T, 4),
+        ...     "next": {"embedding": torch.randn(T, D),
+        ...              "success": torch.zeros(T, 1, dtype=torch.bool)}}, [T])
+        >>> _ = buffer.extend(episode_rows(episode))
+        >>> trainer = RewardHeadTrainer(reward, torch.randn(D), buffer.finetuning, batch_size=16)
+        >>> metrics = trainer.update()
+        >>> trainer.stage, sorted(metrics.keys())[:2]
+        (1, ['loss_neg_neg', 'loss_positional'])
+    """
+
+    def __init__(self, reward: TemporalReward, goal_image_embedding: Tensor,
+                 replay: ReplayBuffer, *, batch_size: int = 256,
+                 lr: float = HEADS_LEARNING_RATE, delta: float = 0.1, l2_margin: float = 0.2,
+                 same_position: bool = True) -> None:
+        if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
+            raise ValueError(f"batch_size={batch_size!r}; expected an integer >= 1.")
+        self.reward = reward
+        self.replay = replay
+        self.batch_size = batch_size
+        self.losses = finetuning_losses(reward, goal_image_embedding, delta=delta,
+                                        l2_margin=l2_margin, same_position=same_position)
+        # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on a
+        # CPU (1.3 ms vs 9 ms a step).
+        self.optimizers = [torch.optim.Adam(loss.parameters(), lr=lr, fused=True)
+                           for loss in self.losses]
+
+    @property
+    def stage(self) -> int:
+        """2 once the replay holds positive states (thesis 3.1.3.2), else 1."""
+        return 2 if "positive" in self.replay.sampler.groups() else 1
+
+    def update(self) -> TensorDict:
+        """One finetuning batch, one step per loss; returns the loss terms and the ``stage``."""
+        batch = self.replay.sample(self.batch_size)
+        metrics = TensorDict({}, [])
+        for loss, optimizer in zip(self.losses, self.optimizers, strict=True):
+            loss_td = loss(batch)
+            value = loss_td[loss.loss_key]
+            if value.requires_grad:
+                optimizer.zero_grad(set_to_none=True)
+                value.backward()
+                optimizer.step()
+            metrics.update(loss_td.detach())
+        metrics["stage"] = torch.tensor(float(self.stage))
+        return metrics
+
+    def state_dict(self) -> dict[str, Any]:
+        """The optimizers' states (the heads are the reward's, saved with it)."""
+        return {"optimizers": [optimizer.state_dict() for optimizer in self.optimizers]}
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        for optimizer, saved in zip(self.optimizers, state_dict["optimizers"], strict=True):
+            optimizer.load_state_dict(saved)

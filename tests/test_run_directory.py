@@ -1,0 +1,83 @@
+"""Run management: the overwrite rules, episode rows cut back to the checkpoint, replay episodes
+and RNG states that round-trip, and files that are never left half-written."""
+
+import random
+
+import numpy as np
+import pytest
+import torch
+from test_replay import make_episode
+
+from temporal_torchrl.data import episode_rows
+from temporal_torchrl.training import RunDirectory, rng_state, set_rng_state
+
+ROW = {"episode": 1, "env_steps": 20, "success": 0, "return": -20.0, "mean_vlm_reward": 0.5,
+       "stage": 1}
+
+
+def test_a_new_directory_starts_and_an_existing_run_is_never_replaced_silently(tmp_path):
+    run = RunDirectory(tmp_path / "run")
+    run.check(resume=False, overwrite=False)  # nothing there: a fresh start
+    with pytest.raises(FileNotFoundError, match="start the run without resume=true"):
+        run.check(resume=True, overwrite=False)
+    run.create(config={"seed": 3})
+    run.append_episode(ROW)
+    with pytest.raises(FileExistsError, match="overwrite=true"):
+        run.check(resume=False, overwrite=False)
+    with pytest.raises(FileNotFoundError, match="before its first checkpoint"):
+        run.check(resume=True, overwrite=False)
+    run.save_checkpoint({"episode": 1})
+    with pytest.raises(FileExistsError, match="resume=true to continue it"):
+        run.check(resume=False, overwrite=False)
+    run.check(resume=True, overwrite=False)
+    run.check(resume=False, overwrite=True)
+    run.create(config={"seed": 4})  # overwrite: the old run's files are gone
+    assert not run.has_checkpoint() and run.episode_rows() == []
+    assert run.config() == {"seed": 4}
+    assert sorted(path.name for path in run.path.iterdir()) == ["config.json", "replay"]
+
+
+def test_episode_rows_are_cut_back_to_the_checkpoint(tmp_path):
+    run = RunDirectory(tmp_path / "run")
+    run.create(config={})
+    for episode in range(1, 5):
+        run.append_episode({**ROW, "episode": episode, "env_steps": 20 * episode})
+    run.truncate_episodes(2)
+    assert [(row["episode"], row["env_steps"]) for row in run.episode_rows()] == [
+        ("1", "20"), ("2", "40")]
+    run.append_episode({**ROW, "episode": 3, "env_steps": 60})
+    assert [row["episode"] for row in run.episode_rows()] == ["1", "2", "3"]
+    assert not list(run.path.glob("*.tmp"))
+
+
+def test_replay_episodes_and_checkpoint_round_trip(tmp_path):
+    run = RunDirectory(tmp_path / "run")
+    run.create(config={})
+    saved = [episode_rows(make_episode(index, 5 + index)) for index in range(3)]
+    for index, rows in enumerate(saved):
+        run.save_replay_episode(index, rows)
+    loaded = list(run.replay_episodes(2))
+    assert len(loaded) == 2
+    for original, restored in zip(saved, loaded, strict=False):
+        assert restored.shape == original.shape
+        assert (restored == original).all()
+        assert restored["embedding"].dtype == torch.float16
+    state = {"episode": 7, "weights": torch.arange(4.0), "successes": [False, True]}
+    run.save_checkpoint(state)
+    restored = run.load_checkpoint()
+    assert restored["episode"] == 7 and restored["successes"] == [False, True]
+    assert torch.equal(restored["weights"], torch.arange(4.0))
+    assert not list(run.path.rglob("*.tmp"))
+
+
+def test_rng_state_restores_every_generator(tmp_path):
+    run = RunDirectory(tmp_path / "run")
+    run.create(config={})
+    torch.manual_seed(1), random.seed(2), np.random.seed(3)
+    run.save_checkpoint({"rng": rng_state()})
+    expected = (torch.rand(3), random.random(), np.random.rand(2))
+    torch.manual_seed(9), random.seed(9), np.random.seed(9)
+    set_rng_state(run.load_checkpoint()["rng"])
+    assert torch.equal(torch.rand(3), expected[0])
+    assert random.random() == expected[1]
+    assert np.array_equal(np.random.rand(2), expected[2])
