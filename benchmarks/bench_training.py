@@ -1,32 +1,41 @@
-"""Training throughput and replay-buffer costs, each next to a raw TorchRL reference.
+"""Training throughput: the training step against the compute bound, the whole loop, the replay.
 
-Rows:
-1. whole loop, state encoder (D = 1024, FuRL + D3, one head update and one SAC update per step,
-   batch 256) vs a plain TorchRL SAC loop on the same env (TensorDictReplayBuffer, same networks
-   and update schedule), env steps/s; and the recipe without a VLM reward against the same
-   reference (the recipe's own overhead: episode buffer, logging, checkpoints);
-2. whole loop with rendering + a random-weight LIV encoder (256x256 frames) vs the same env
-   pipeline stepping without any training, env steps/s;
-3. sampling 256 sub-trajectories at 500,000 transitions (D = 1024): EpisodeReplayBuffer.sample
-   (a TorchRL ReplayBuffer: s_{t+1}, s_0, s_{t+1-k} by index, laid out for SAC by its
-   transform) vs TorchRL's SliceSampler(slice_len=2) on a LazyTensorStorage with the same
-   float16 embeddings; and a finetuning batch (stage 2: 256 negatives, positives, pairs);
-4. replay memory at 500,000 transitions vs storing s_t and s_{t+1} as float32 (the naive layout).
+Sections (``--sections``, default all), each row next to its reference measured in the same run:
 
-Runs on one torch thread (the machine may be shared). ``--quick`` shortens every timing.
+step    the training step alone, as the recipe runs it: one reward-head update (FuRL's ranking
+        loss and D3's directional loss, stage 2: every loss term active), one SAC batch sampled
+        and relabelled, one SAC update; batch 256, D = 1024. Eager and compiled
+        (``torch.compile``), each against the compute bound: the step's FLOPs (counted with
+        ``torch.utils.flop_counter.FlopCounterMode``) divided by this machine's fp32 GEMM
+        throughput (a 2048^3 matmul, measured); the achieved fraction of that bound.
+loop    the whole recipe (``recipes/sac_temporal.py``'s ``train``), env steps/s in the steady
+        state (the 3rd and 4th rounds of episodes: runs of 2 and 4 rounds, differenced, so build,
+        warm-up and compilation cancel out) for the state encoder (D = 1024), the shipped encoder
+        at 64 px and a random-weight LIV at 224 px; ``env.num_envs`` 1, 2 and 4, eager and
+        compiled; against today's loop (one env, eager) of the same encoder.
+reference  the recipe without a VLM reward against a plain TorchRL SAC loop on the same env
+        (TensorDictReplayBuffer, same networks and schedule): the recipe's own overhead.
+replay  sampling 256 transitions with their histories at 500,000 transitions (D = 1024) against
+        TorchRL's SliceSampler(slice_len=2) on the same float16 embeddings; a stage-2 finetuning
+        batch; the replay memory against storing s_t and s_{t+1} in float32.
+
+``--threads`` sets torch's threads (default: all cores). ``--quick`` shortens everything.
 """
 
 from __future__ import annotations
 
+import argparse
+import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import torch
-from _common import parse_args, report, seconds_per_call
+from _common import machine_description, report, seconds_per_call
 from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
+from torch.utils.flop_counter import FlopCounterMode
 from torchrl.data import LazyTensorStorage, SliceSampler, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
@@ -39,15 +48,148 @@ import utils  # noqa: E402
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows  # noqa: E402
 from temporal_torchrl.envs import make_env  # noqa: E402
 
+SECTIONS = ("step", "loop", "reference", "replay")
+
 
 def recipe_config(output_dir: Path, *overrides: str):
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
         return compose("config", overrides=[
             f"output_dir={output_dir}", "logger.backend=none", "train.progress=false",
-            "train.random_steps=0", "reward.directional=d3", "reward.lambda_=4.0",
-            "reward.rho=1.0", *overrides])
+            "train.random_steps=0", "reward.positional=furl", "reward.directional=d3",
+            "reward.lambda_=4.0", "reward.rho=1.0", "train.device=cpu", *overrides])
 
 
+def synthetic_episode(length: int, dim: int, success_from: int | None = None) -> TensorDict:
+    embedding, observation = torch.randn(length + 1, dim), torch.randn(length + 1, 39)
+    success = torch.zeros(length + 1, 1, dtype=torch.bool)
+    if success_from is not None:
+        success[success_from:] = True
+    return TensorDict({
+        "observation": observation[:-1], "embedding": embedding[:-1],
+        "action": torch.rand(length, 4) * 2 - 1, "success": success[:-1],
+        "next": {"observation": observation[1:], "embedding": embedding[1:],
+                 "success": success[1:],
+                 "terminated": torch.zeros(length, 1, dtype=torch.bool)}}, [length])
+
+
+# --------------------------------------------------------------------------- step
+def training_step(compiled: bool, tmp: Path):
+    """The recipe's step (head update, SAC batch + relabel, SAC update) on a stage-2 buffer."""
+    cfg = recipe_config(tmp / "step", "encoder.name=state", "+encoder.options.dim=1024",
+                        f"compile.enabled={str(compiled).lower()}")
+    torch.manual_seed(0)
+    encoder = utils.make_encoder(cfg)
+    reward = utils.make_reward(cfg, encoder)
+    env = utils.make_environment(cfg, None, None)
+    actor, qvalue = utils.make_sac_agent(cfg, env)
+    env.close()
+    loss, target_updater, optimizer = utils.make_sac_loss(cfg, actor, qvalue, 4)
+    update_sac = utils.make_sac_update(cfg, loss, target_updater, optimizer)
+    buffer = utils.make_replay_buffer(cfg, 20 * 501, reward)
+    buffer.extend(episode_rows(synthetic_episode(500, 1024, success_from=300)))
+    for _ in range(9):
+        buffer.extend(episode_rows(synthetic_episode(500, 1024)))
+    trainer = utils.make_reward_trainer(cfg, reward, torch.randn(1024), buffer)
+    assert trainer.stage == 2
+
+    def step() -> None:
+        trainer.update()
+        update_sac(buffer.sample())
+
+    return step
+
+
+def gemm_flops_per_second(size: int = 2048) -> float:
+    a, b = torch.randn(size, size), torch.randn(size, size)
+    seconds = seconds_per_call(lambda: a @ b, min_seconds=2.0)
+    return 2 * size ** 3 / seconds
+
+
+def step_rows(tmp: Path, quick: bool) -> list[dict]:
+    minimum = 1.0 if quick else 5.0
+    eager = training_step(False, tmp)
+    with FlopCounterMode(display=False) as counter:
+        eager()
+    flops = counter.get_total_flops()
+    peak = gemm_flops_per_second()
+    bound = flops / peak
+    eager_seconds = seconds_per_call(eager, min_seconds=minimum, warmup_calls=5)
+    compiled = training_step(True, tmp)
+    start = time.perf_counter()
+    for _ in range(3):  # compilation, and the recompile at the first stage-2 graph
+        compiled()
+    compile_seconds = time.perf_counter() - start
+    compiled_seconds = seconds_per_call(compiled, min_seconds=minimum, warmup_calls=5)
+    print(f"step: {flops / 1e9:.3f} GFLOP, GEMM {peak / 1e9:.1f} GFLOP/s, compile "
+          f"{compile_seconds:.0f} s", flush=True)
+    reference = f"compute bound: {flops / 1e9:.2f} GFLOP / {peak / 1e9:.0f} GFLOP/s GEMM"
+    return [
+        {"measure": "training step, eager (ms)", "project": 1000 * eager_seconds,
+         "reference": 1000 * bound, "reference is": reference,
+         "ratio": bound / eager_seconds},
+        {"measure": "training step, compiled (ms)", "project": 1000 * compiled_seconds,
+         "reference": 1000 * bound, "reference is": reference,
+         "ratio": bound / compiled_seconds},
+        {"measure": "training step, compiled vs eager (speed-up)",
+         "project": eager_seconds / compiled_seconds, "reference": 1.0,
+         "reference is": "eager", "ratio": eager_seconds / compiled_seconds},
+    ]
+
+
+# --------------------------------------------------------------------------- loop
+ENCODERS = {  # name: (overrides, episode length, quick episode length)
+    "state encoder, D=1024": (("encoder.name=state", "+encoder.options.dim=1024"), 50, 20),
+    "shipped encoder, 64 px": (("encoder.name=metaworld_small", "env.image_size=64"), 50, 20),
+    "random LIV, 224 px": (("encoder.name=liv", "env.image_size=224"), 16, 8),
+}
+
+
+def steady_steps_per_second(cfg_overrides: list[str], num_envs: int, length: int,
+                            tmp: Path) -> float:
+    """Env steps/s over the 3rd and 4th rounds of ``num_envs`` episodes: runs of 2 and 4
+    rounds, differenced (build, the first round without updates, and compilation cancel)."""
+    times, steps = [], []
+    for rounds in (2, 4):
+        run_dir = tmp / f"loop_{len(os.listdir(tmp))}"
+        cfg = recipe_config(run_dir, *cfg_overrides, f"env.num_envs={num_envs}",
+                            f"env.max_episode_steps={length}",
+                            f"train.episodes={rounds * num_envs}")
+        summary = sac_temporal.train(cfg)
+        steps.append(summary["env_steps"])
+        times.append(summary["env_steps"] / summary["steps_per_second"])
+    return (steps[1] - steps[0]) / (times[1] - times[0])
+
+
+def loop_rows(tmp: Path, quick: bool, skip_liv: bool) -> list[dict]:
+    from temporal_torchrl.encoders import save_random_liv_checkpoint
+
+    checkpoint = tmp / "liv.pt"
+    save_random_liv_checkpoint(checkpoint)
+    rows = []
+    for name, (overrides, length, quick_length) in ENCODERS.items():
+        if skip_liv and "LIV" in name:
+            continue
+        overrides = [*overrides] + ([f"encoder.checkpoint={checkpoint}"] if "LIV" in name
+                                    else [])
+        length = quick_length if quick else length
+        today = None
+        for compiled in (False, True):
+            for num_envs in ((1, 2) if quick else (1, 2, 4)):
+                rate = steady_steps_per_second(
+                    [*overrides, f"compile.enabled={str(compiled).lower()}"], num_envs, length,
+                    tmp)
+                today = rate if today is None else today
+                print(f"loop: {name}, {num_envs} envs, compiled={compiled}: {rate:.1f}/s",
+                      flush=True)
+                rows.append({"measure": f"whole loop, {name}, {num_envs} env(s), "
+                                        f"{'compiled' if compiled else 'eager'} (env steps/s)",
+                             "project": rate, "reference": today,
+                             "reference is": "one env, eager (today's loop)",
+                             "ratio": rate / today})
+    return rows
+
+
+# --------------------------------------------------------------------------- reference
 def plain_sac_steps_per_second(cfg, episodes: int) -> float:
     """The reference: TorchRL env.step + per-step buffer extend + SACLoss update, no VLM."""
     env = make_env(cfg.env.task, cfg.env.seed, max_episode_steps=cfg.env.max_episode_steps)
@@ -63,8 +205,7 @@ def plain_sac_steps_per_second(cfg, episodes: int) -> float:
             with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
                 actor(tensordict)
             tensordict = env.step(tensordict)
-            buffer.add(tensordict.select("observation", "action", "next").exclude(
-                ("next", "pixels")))
+            buffer.add(tensordict.select("observation", "action", "next"))
             steps += 1
             if steps > cfg.env.max_episode_steps:  # the recipe updates from its 2nd episode on
                 losses = loss(buffer.sample())
@@ -78,16 +219,20 @@ def plain_sac_steps_per_second(cfg, episodes: int) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def pipeline_steps_per_second(cfg, steps: int) -> float:
-    """Reference for the rendering row: the render -> embed -> reward env, no training."""
-    encoder = utils.make_encoder(cfg)
-    env = utils.make_environment(cfg, encoder, utils.make_reward(cfg, encoder))
-    env.rollout(2, break_when_any_done=False)
-    start = time.perf_counter()
-    env.rollout(steps, break_when_any_done=False)
-    return steps / (time.perf_counter() - start)
+def reference_rows(tmp: Path, quick: bool) -> list[dict]:
+    episodes, length = (3, 100) if quick else (4, 250)
+    cfg = recipe_config(tmp / "sac", f"train.episodes={episodes}",
+                        f"env.max_episode_steps={length}", "reward.positional=none",
+                        "reward.directional=none")
+    summary = sac_temporal.train(cfg)
+    reference = plain_sac_steps_per_second(cfg, episodes)
+    return [{"measure": "whole loop, no VLM reward (env steps/s)",
+             "project": summary["steps_per_second"], "reference": reference,
+             "reference is": "plain TorchRL SAC loop",
+             "ratio": summary["steps_per_second"] / reference}]
 
 
+# --------------------------------------------------------------------------- replay
 def filled_buffers(transitions: int, dim: int = 1024, episode_length: int = 500):
     """The project's buffer and a TorchRL SliceSampler buffer, both with ``transitions``."""
     episodes = transitions // episode_length
@@ -99,94 +244,70 @@ def filled_buffers(transitions: int, dim: int = 1024, episode_length: int = 500)
                              truncated_key=None), batch_size=512)
     done = torch.zeros(episode_length, 1, dtype=torch.bool)
     done[-1] = True
-    for index in range(episodes):
-        embedding = torch.randn(episode_length + 1, dim)
-        observation = torch.randn(episode_length + 1, 39)
-        success = torch.zeros(episode_length, 1, dtype=torch.bool)
-        if index == 0:  # one successful episode: the finetuning batch has every group
-            success[400:] = True
-        episode = TensorDict({
-            "observation": observation[:-1], "embedding": embedding[:-1],
-            "action": torch.rand(episode_length, 4), "success": success,
-            "next": {"observation": observation[1:], "embedding": embedding[1:],
-                     "success": success, "terminated": torch.zeros_like(done), "done": done},
-        }, [episode_length])
+    for index in range(episodes):  # the first one successful: finetuning has every group
+        episode = synthetic_episode(episode_length, dim, 400 if index == 0 else None)
         ours.extend(episode_rows(episode))
         flat = TensorDict({
-            "observation": observation[:-1], "action": episode["action"],
+            "observation": episode["observation"], "action": episode["action"],
             "episode": torch.full((episode_length,), index),
-            "next": {"observation": observation[1:], "embedding": embedding[1:].half(),
+            "next": {"observation": episode["next", "observation"],
+                     "embedding": episode["next", "embedding"].half(),
                      "done": done, "terminated": torch.zeros_like(done)}}, [episode_length])
         reference.extend(flat)
     return ours, reference
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
-    torch.set_num_threads(1)
-    quick = args.quick
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        # 1. whole loop, state encoder
-        episodes, length = (3, 100) if quick else (4, 250)
-        cfg = recipe_config(tmp / "state", "encoder.name=state", f"train.episodes={episodes}",
-                            f"env.max_episode_steps={length}")
-        summary = sac_temporal.train(cfg)
-        reference = plain_sac_steps_per_second(cfg, episodes)
-        rows.append({"measure": "whole loop, state encoder, FuRL + D3, D=1024 (env steps/s)",
-                     "project": summary["steps_per_second"],
-                     "reference": reference, "reference is": "plain TorchRL SAC loop",
-                     "ratio": summary["steps_per_second"] / reference})
-
-        # 1b. the same loop without the VLM reward: the recipe's own overhead
-        cfg = recipe_config(tmp / "sac", f"train.episodes={episodes}",
-                            f"env.max_episode_steps={length}", "reward.positional=none",
-                            "reward.directional=none")
-        summary = sac_temporal.train(cfg)
-        rows.append({"measure": "whole loop, no VLM reward (env steps/s)",
-                     "project": summary["steps_per_second"],
-                     "reference": reference, "reference is": "plain TorchRL SAC loop",
-                     "ratio": summary["steps_per_second"] / reference})
-
-        # 2. whole loop, rendering + LIV-format encoder (random weights)
-        from temporal_torchrl.encoders import save_random_liv_checkpoint
-
-        checkpoint = tmp / "liv.pt"
-        save_random_liv_checkpoint(checkpoint)
-        length = 10 if quick else 30
-        cfg = recipe_config(tmp / "liv", "encoder.name=liv", f"encoder.checkpoint={checkpoint}",
-                            "env.image_size=256", "train.episodes=2",
-                            f"env.max_episode_steps={length}")
-        summary = sac_temporal.train(cfg)
-        reference = pipeline_steps_per_second(cfg, length)
-        rows.append({"measure": "whole loop, render 256px + LIV RN50 (env steps/s)",
-                     "project": summary["steps_per_second"], "reference": reference,
-                     "reference is": "same env pipeline, no training",
-                     "ratio": summary["steps_per_second"] / reference})
-
-    # 3. and 4. the replay buffer at 500,000 transitions
+def replay_rows(quick: bool) -> list[dict]:
     transitions = 500_000
     ours, reference = filled_buffers(transitions)
     minimum = 0.5 if quick else 2.0
     ours_seconds = seconds_per_call(lambda: ours.sample(256), min_seconds=minimum)
     reference_seconds = seconds_per_call(lambda: reference.sample(), min_seconds=minimum)
-    rows.append({"measure": "sample 256 sub-trajectories at 500k (ms)",
-                 "project": 1000 * ours_seconds, "reference": 1000 * reference_seconds,
-                 "reference is": "SliceSampler(slice_len=2), float16 embeddings",
-                 "ratio": ours_seconds / reference_seconds})
     finetuning_seconds = seconds_per_call(lambda: ours.finetuning.sample(256),
                                           min_seconds=minimum)
-    rows.append({"measure": "finetuning batch (256 negatives, positives, pairs) at 500k (ms)",
-                 "project": 1000 * finetuning_seconds, "reference": 1000 * reference_seconds,
-                 "reference is": "SliceSampler(slice_len=2), float16 embeddings",
-                 "ratio": finetuning_seconds / reference_seconds})
     naive = transitions * (2 * 1024 * 4 + 2 * 39 * 4 + 4 * 4 + 4)
-    rows.append({"measure": "replay memory at 500k transitions, D=1024 (GB)",
-                 "project": ours.memory_bytes() / 1e9, "reference": naive / 1e9,
-                 "reference is": "s_t and s_t+1 as float32 (computed)",
-                 "ratio": ours.memory_bytes() / naive})
-    report("Training loop and replay buffer", rows, args.json)
+    slice_reference = "SliceSampler(slice_len=2), float16 embeddings"
+    return [
+        {"measure": "sample 256 transitions + histories at 500k (ms)",
+         "project": 1000 * ours_seconds, "reference": 1000 * reference_seconds,
+         "reference is": slice_reference, "ratio": ours_seconds / reference_seconds},
+        {"measure": "finetuning batch (256 negatives, positives, pairs) at 500k (ms)",
+         "project": 1000 * finetuning_seconds, "reference": 1000 * reference_seconds,
+         "reference is": slice_reference, "ratio": finetuning_seconds / reference_seconds},
+        {"measure": "replay memory at 500k transitions, D=1024 (GB)",
+         "project": ours.memory_bytes() / 1e9, "reference": naive / 1e9,
+         "reference is": "s_t and s_t+1 as float32 (computed)",
+         "ratio": ours.memory_bytes() / naive},
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
+    parser.add_argument("--quick", action="store_true", help="shorter timings (smoke runs)")
+    parser.add_argument("--sections", default=",".join(SECTIONS),
+                        help=f"comma-separated subset of {', '.join(SECTIONS)}")
+    parser.add_argument("--threads", type=int, default=os.cpu_count(),
+                        help="torch threads (default: all cores)")
+    parser.add_argument("--skip-liv", action="store_true", help="no LIV loop rows")
+    args = parser.parse_args()
+    sections = args.sections.split(",")
+    if unknown := set(sections) - set(SECTIONS):
+        parser.error(f"unknown sections {sorted(unknown)}; choose from {', '.join(SECTIONS)}")
+    torch.set_num_threads(args.threads)
+    print(f"machine: {machine_description()}", flush=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        if "step" in sections:
+            rows += step_rows(tmp, args.quick)
+        if "loop" in sections:
+            rows += loop_rows(tmp, args.quick, args.skip_liv)
+        if "reference" in sections:
+            rows += reference_rows(tmp, args.quick)
+    if "replay" in sections:
+        rows += replay_rows(args.quick)
+    report("Training step, whole loop and replay buffer", rows, args.json)
 
 
 if __name__ == "__main__":

@@ -99,6 +99,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     actor, qvalue = utils.make_sac_agent(cfg, env)
     sac_loss, target_updater, sac_optimizer = utils.make_sac_loss(
         cfg, actor, qvalue, env.action_spec.shape[-1])
+    update_sac = utils.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
     expert_rows = (state["expert_rows"] if state is not None
                    else sum(len(episode) + 1 for episode in preloaded))
     capacity = replay_capacity(cfg, expert_rows,
@@ -117,7 +118,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                                                      embedding_dtype=embedding_dtype)):
             run.save_replay_episode(index, rows)
         episode, env_steps, inserted, updates = 0, 0, len(preloaded), 0
-        successes, last_metrics = [], {}
+        successes, last_metrics, credits = [], {}, {"sac": 0.0, "reward": 0.0}
     else:
         sac_loss.load_state_dict(state["sac_loss"])
         sac_optimizer.load_state_dict(state["sac_optimizer"])
@@ -128,81 +129,85 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         episode, env_steps, inserted = state["episode"], state["env_steps"], state["inserted"]
         updates, last_metrics = state["updates"], state["last_metrics"]
         successes = list(state["successes"])
+        credits = dict(state.get("credits", {"sac": 0.0, "reward": 0.0}))
         for rows in run.replay_episodes(inserted):
             buffer.extend(rows)
         run.truncate_episodes(episode)
-    collector = utils.make_collector(env, actor, max(0, cfg.train.random_steps - env_steps))
+    collector = utils.make_collector(cfg, env, actor, max(0, cfg.train.random_steps - env_steps))
     if state is not None:  # after every random draw the build makes
         set_rng_state(state["rng"])
     logger = utils.make_logger(cfg, run.path)
     metrics = MetricWindow()
 
-    def update_sac() -> None:
-        batch = buffer.sample()  # rewards relabelled with the current heads
-        loss_td = sac_loss(batch)
-        total = loss_td["loss_actor"] + loss_td["loss_qvalue"] + loss_td["loss_alpha"]
-        sac_optimizer.zero_grad(set_to_none=True)
-        total.backward()
-        sac_optimizer.step()
-        target_updater.step()
-        metrics.add("sac", loss_td.select("loss_actor", "loss_qvalue", "loss_alpha", "alpha",
-                                          "entropy"))
-        metrics.add("relabelled", reward_statistics(batch["next"]))
-
-    # ---- training loop: one env step, then its updates
-    start_time, start_steps = time.perf_counter(), env_steps
+    # ---- training loop: one vector step of env.num_envs envs, then its updates
+    num_envs, start_time, start_steps = cfg.env.num_envs, time.perf_counter(), env_steps
     bar = tqdm(total=cfg.train.episodes, initial=episode, disable=not cfg.train.progress,
                desc="episodes")
-    stage, steps = 2 if buffer.has_positives else 1, []
+    stages = [2 if buffer.has_positives else 1] * num_envs  # each env's episode's stage
+    steps = [[] for _ in range(num_envs)]
     for data in collector:
-        steps.append(data.select(*STEP_KEYS, strict=False))
-        env_steps += 1
+        data = data.reshape(num_envs)
+        for index in range(num_envs):
+            steps[index].append(data[index].select(*STEP_KEYS, strict=False))
+        env_steps += num_envs
         if env_steps > cfg.train.random_steps and buffer.num_transitions > 0:
-            for _ in range(cfg.train.reward_updates_per_step if trainer is not None else 0):
+            # The update-to-data ratio holds at any num_envs; fractions carry over.
+            credits["reward"] += num_envs * cfg.train.reward_updates_per_step * (
+                trainer is not None)
+            credits["sac"] += num_envs * cfg.train.utd_ratio
+            while credits["reward"] >= 1:
                 metrics.add("reward", trainer.update())
-            for _ in range(cfg.train.updates_per_step):
-                update_sac()
+                credits["reward"] -= 1
+            while credits["sac"] >= 1:
+                batch = buffer.sample()  # rewards relabelled with the current heads
+                metrics.add("sac", update_sac(batch))
+                metrics.add("relabelled", reward_statistics(batch["next"]))
+                credits["sac"] -= 1
                 updates += 1
                 if updates % cfg.logger.log_every == 0:
                     last_metrics = metrics.flush()
                     last_metrics.update({"train/stage": 2.0 if buffer.has_positives else 1.0,
                                          "train/positive_states": buffer.num_positive_states})
                     log_metrics(logger, last_metrics, env_steps)
-        if not data["next", "done"].any():
+        ended = data["next", "done"].reshape(num_envs).nonzero().reshape(-1).tolist()
+        if not ended:
             continue
 
-        # ---- episode end: label + insert, log, checkpoint
-        trajectory, steps = torch.cat(steps), []
-        rows = episode_rows(trajectory, embedding_dtype=embedding_dtype)
-        buffer.extend(rows)
-        run.save_replay_episode(inserted, rows)
-        inserted += 1
-        episode += 1
-        success = episode_success(trajectory["next", "success"])
-        successes.append(success)
-        task_rewards = trajectory.get(("next", "task_reward"),
-                                      trajectory["next", "success"].float() - 1.0)
-        vlm_rewards = trajectory.get(("next", "vlm_reward"), torch.zeros_like(task_rewards))
-        row = {"episode": episode, "env_steps": env_steps, "success": int(success),
-               "return": float(task_rewards.sum()), "mean_vlm_reward": float(vlm_rewards.mean()),
-               "stage": stage}
-        run.append_episode(row)
-        log_metrics(logger, {f"train/{key}": float(row[key]) for key in
-                             ("success", "return", "mean_vlm_reward", "stage")}, env_steps)
-        stage = 2 if buffer.has_positives else 1
+        # ---- episode ends (in env order): label + insert, log, checkpoint
+        checkpointed_before = episode // cfg.train.checkpoint_every
+        for index in ended[:cfg.train.episodes - episode]:
+            trajectory, steps[index] = torch.stack(steps[index]), []
+            rows = episode_rows(trajectory, embedding_dtype=embedding_dtype)
+            buffer.extend(rows)
+            run.save_replay_episode(inserted, rows)
+            inserted += 1
+            episode += 1
+            success = episode_success(trajectory["next", "success"])
+            successes.append(success)
+            task_rewards = trajectory.get(("next", "task_reward"),
+                                          trajectory["next", "success"].float() - 1.0)
+            vlm_rewards = trajectory.get(("next", "vlm_reward"), torch.zeros_like(task_rewards))
+            row = {"episode": episode, "env_steps": env_steps, "success": int(success),
+                   "return": float(task_rewards.sum()),
+                   "mean_vlm_reward": float(vlm_rewards.mean()), "stage": stages[index]}
+            run.append_episode(row)
+            log_metrics(logger, {f"train/{key}": float(row[key]) for key in
+                                 ("success", "return", "mean_vlm_reward", "stage")}, env_steps)
+            stages[index] = 2 if buffer.has_positives else 1
+            bar.update(1)
         elapsed = time.perf_counter() - start_time
-        bar.update(1)
         bar.set_postfix(success_rate=f"{sum(successes) / len(successes):.2f}",
                         steps_per_s=f"{(env_steps - start_steps) / max(elapsed, 1e-9):.0f}")
-        if episode % cfg.train.checkpoint_every == 0 or episode == cfg.train.episodes:
+        if (episode // cfg.train.checkpoint_every > checkpointed_before
+                or episode >= cfg.train.episodes):
             run.save_checkpoint({
                 "sac_loss": sac_loss.state_dict(), "sac_optimizer": sac_optimizer.state_dict(),
                 "reward": reward.state_dict() if reward is not None else {},
                 "trainer": trainer.state_dict() if trainer is not None else {},
                 "goal_image": goal_image if trainer is not None else None,
                 "episode": episode, "env_steps": env_steps, "inserted": inserted,
-                "updates": updates, "last_metrics": last_metrics, "successes": successes,
-                "rng": rng_state(), "buffer_capacity": buffer.capacity,
+                "updates": updates, "credits": credits, "last_metrics": last_metrics,
+                "successes": successes, "rng": rng_state(), "buffer_capacity": buffer.capacity,
                 "preloaded": buffer.num_permanent_episodes, "expert_rows": expert_rows})
         stopped = (cfg.train.stop_after_episodes is not None
                    and episode >= cfg.train.stop_after_episodes)

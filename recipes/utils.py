@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
 import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
-from tensordict.nn import TensorDictModule
+from tensordict.nn import CudaGraphModule, TensorDictModule
 from tensordict.nn.distributions import NormalParamExtractor
 from torch import nn
 from torchrl.collectors import Collector
@@ -27,13 +30,14 @@ from temporal_torchrl.envs import (
 )
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.training import RewardHeadTrainer
-from temporal_torchrl.training.config import none_or_name
+from temporal_torchrl.training.config import none_or_name, resolve_device
 
 
 def make_encoder(cfg: DictConfig) -> Encoder:
     options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
+    train_device = OmegaConf.select(cfg, "train.device")  # absent in evaluate_rewards.yaml
     return load_encoder(cfg.encoder.name, checkpoint=cfg.encoder.checkpoint,
-                        device=cfg.encoder.device, **options)
+                        device=resolve_device(cfg.encoder.device, train_device), **options)
 
 
 def describe_encoder(cfg: DictConfig, encoder: Encoder | None) -> str:
@@ -50,8 +54,9 @@ def describe_encoder(cfg: DictConfig, encoder: Encoder | None) -> str:
 
 
 def make_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
-    """The run's reward, goal and baseline texts embedded by the encoder's text side."""
-    return make_temporal_reward(
+    """The run's reward on ``train.device``, goal and baseline texts embedded by the encoder's
+    text side."""
+    reward = make_temporal_reward(
         cfg.env.task, encoder, positional=none_or_name(cfg.reward.positional),
         directional=none_or_name(cfg.reward.directional), baseline=cfg.reward.baseline,
         rho=cfg.reward.rho, lambda_=cfg.reward.lambda_, k=cfg.reward.k, alpha=cfg.reward.alpha,
@@ -59,6 +64,9 @@ def make_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
         certainty_bandwidth=cfg.reward.certainty_bandwidth,
         certainty_prior=cfg.reward.certainty_prior,
         certainty_scaling=cfg.reward.certainty_scaling)
+    if cfg.compile.enabled:  # the relabelling (and the env's reward) runs compiled
+        reward.compile(mode=cfg.compile.mode)
+    return reward.to(resolve_device(cfg.train.device))
 
 
 def make_environment(cfg: DictConfig, encoder: Encoder | None,
@@ -66,7 +74,8 @@ def make_environment(cfg: DictConfig, encoder: Encoder | None,
     return make_temporal_env(cfg.env.task, cfg.env.seed, encoder=encoder, reward=reward,
                              image_size=cfg.env.image_size, camera=cfg.env.camera,
                              fast_render=cfg.env.fast_render,
-                             max_episode_steps=cfg.env.max_episode_steps)
+                             max_episode_steps=cfg.env.max_episode_steps,
+                             num_envs=cfg.env.num_envs)
 
 
 def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
@@ -85,14 +94,17 @@ def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
 
 def make_replay_buffer(cfg: DictConfig, capacity: int,
                        reward: TemporalReward | None) -> EpisodeReplayBuffer:
-    """Whole episodes; ``sample()`` gives SAC batches relabelled by ``reward``'s current heads,
-    ``finetuning.sample()`` the heads' batches; the preloaded experts are permanent."""
+    """Whole episodes on ``replay_buffer.device``; ``sample()`` gives SAC batches on
+    ``train.device`` relabelled by ``reward``'s current heads, ``finetuning.sample()`` the heads'
+    batches; the preloaded experts are permanent."""
     return EpisodeReplayBuffer(
         capacity, history=cfg.reward.k,
         window_length=reward.window_length if reward is not None else None,
         label_window=cfg.reward.label_window, gap=cfg.reward.gap,
         permanent_episodes=cfg.train.preload_positives, reward=reward,
-        batch_size=cfg.sac.batch_size, finetuning_batch_size=cfg.reward.batch_size)
+        batch_size=cfg.sac.batch_size, finetuning_batch_size=cfg.reward.batch_size,
+        device=resolve_device(cfg.replay_buffer.device, cfg.train.device),
+        batch_device=resolve_device(cfg.train.device))
 
 
 def make_reward_trainer(cfg: DictConfig, reward: TemporalReward, goal_image: torch.Tensor,
@@ -100,12 +112,15 @@ def make_reward_trainer(cfg: DictConfig, reward: TemporalReward, goal_image: tor
     return RewardHeadTrainer(reward, goal_image, buffer.finetuning,
                              batch_size=cfg.reward.batch_size, lr=cfg.reward.lr,
                              delta=cfg.reward.delta, l2_margin=cfg.reward.l2_margin,
-                             same_position=cfg.reward.same_position)
+                             same_position=cfg.reward.same_position,
+                             compile=cfg.compile.enabled, compile_mode=cfg.compile.mode)
 
 
 def make_sac_agent(cfg: DictConfig, env: EnvBase) -> tuple[ProbabilisticActor, ValueOperator]:
-    """Tanh-Gaussian actor and a Q-network, MLPs on the state (the prior work's SAC)."""
-    action_spec = env.action_spec
+    """Tanh-Gaussian actor and a Q-network on ``train.device``, MLPs on the state (the prior
+    work's SAC)."""
+    device = resolve_device(cfg.train.device)
+    action_spec = env.action_spec_unbatched.to(device)
     action_dim = action_spec.shape[-1]
     actor_net = nn.Sequential(
         MLP(num_cells=list(cfg.sac.hidden_sizes), out_features=2 * action_dim,
@@ -121,10 +136,10 @@ def make_sac_agent(cfg: DictConfig, env: EnvBase) -> tuple[ProbabilisticActor, V
         MLP(num_cells=list(cfg.sac.hidden_sizes), out_features=1, activation_class=nn.ReLU),
         in_keys=["action", "observation"])
     with torch.no_grad():  # materialise the lazy layers
-        probe = env.fake_tensordict()
+        probe = env.fake_tensordict().to(device)
         actor(probe)
         qvalue(probe)
-    return actor, qvalue
+    return actor.to(device), qvalue.to(device)
 
 
 def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOperator,
@@ -136,22 +151,50 @@ def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOpera
                    delay_qvalue=True)
     loss.make_value_estimator(gamma=cfg.sac.gamma)
     target_updater = SoftUpdate(loss, tau=cfg.sac.tau)
-    # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on CPU.
-    optimizer = torch.optim.Adam(loss.parameters(), lr=cfg.sac.lr, fused=True)
+    # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on CPU;
+    # captured in a CUDA graph, its state must live on the GPU (capturable).
+    optimizer = torch.optim.Adam(loss.parameters(), lr=cfg.sac.lr, fused=True,
+                                 capturable=cfg.compile.cudagraphs)
     return loss, target_updater, optimizer
 
 
-def make_collector(env: EnvBase, actor: ProbabilisticActor, random_frames: int) -> Collector:
-    """One env step per iteration, so every step is followed by its updates (the thesis's
-    schedule); uniform random actions for the first ``random_frames`` steps, then the actor's
-    samples. The collector resets the env when an episode ends."""
-    return Collector(env, actor, frames_per_batch=1, total_frames=-1,
-                     init_random_frames=random_frames,
+def make_sac_update(cfg: DictConfig, loss: SACLoss, target_updater: SoftUpdate,
+                    optimizer: torch.optim.Optimizer) -> Callable[[TensorDict], TensorDict]:
+    """One SAC step on a batch: losses, backward, Adam, target update; returns the detached
+    losses, alpha and entropy. Compiled (``compile.*``) as in TorchRL's SAC recipe."""
+    def update(batch: TensorDict) -> TensorDict:
+        loss_td = loss(batch)
+        (loss_td["loss_actor"] + loss_td["loss_qvalue"] + loss_td["loss_alpha"]).backward()
+        optimizer.step()
+        optimizer.zero_grad(set_to_none=True)
+        target_updater.step()
+        return loss_td.select("loss_actor", "loss_qvalue", "loss_alpha", "alpha",
+                              "entropy").detach()
+
+    if cfg.compile.enabled:
+        update = torch.compile(update, mode=cfg.compile.mode)
+    if cfg.compile.cudagraphs:
+        update = CudaGraphModule(update, in_keys=[], out_keys=[], warmup=5)
+    return update
+
+
+def make_collector(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor,
+                   random_frames: int) -> Collector:
+    """One vector step (``env.num_envs`` env steps) per iteration, so every step is followed by
+    its updates (the thesis's schedule); uniform random actions for the first ``random_frames``
+    steps, then the actor's samples (on ``train.device``, compiled with ``compile.enabled``).
+    The collector resets each env when its episode ends."""
+    num_envs = cfg.env.num_envs
+    return Collector(env, actor, frames_per_batch=num_envs, total_frames=-1,
+                     init_random_frames=-(-random_frames // num_envs) * num_envs,
                      exploration_type=ExplorationType.RANDOM,
+                     policy_device=resolve_device(cfg.train.device), env_device=env.device,
+                     storing_device=env.device,
+                     compile_policy={"mode": cfg.compile.mode} if cfg.compile.enabled else None,
                      auto_register_policy_transforms=False)
 
 
-def make_logger(cfg: DictConfig, run_dir) -> Logger | None:
+def make_logger(cfg: DictConfig, run_dir: Path) -> Logger | None:
     name = cfg.logger.exp_name or run_dir.name
     if cfg.logger.backend == "csv":
         return CSVLogger(name, log_dir=str(run_dir / "logs"))

@@ -9,10 +9,11 @@ the README) to change the order or add your own.
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 from tensordict import TensorDict
-from torchrl.envs import EnvBase, TransformedEnv
+from torchrl.envs import EnvBase, ParallelEnv, TransformedEnv
 
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.experts import collect_expert_episodes
@@ -76,12 +77,17 @@ def make_temporal_reward(task: str, encoder: Encoder, *, positional: str | None 
 def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = None,
                       reward: TemporalReward | None = None, history: int | None = None,
                       image_size: int = 224, camera: str = "corner2", fast_render: bool = True,
-                      max_episode_steps: int = 500) -> EnvBase:
+                      max_episode_steps: int = 500, num_envs: int = 1) -> EnvBase:
     """``task``'s env -> (render) -> embedding -> history -> temporal reward.
 
     Frames are rendered only when ``encoder`` reads pixels; without an encoder the plain task
     env (sparse reward) is returned. The history transform keeps s_0 and s_{t-k}, ``k`` from
     ``reward`` (or ``history`` without one), and the window a d_sequence reward reads.
+
+    With ``num_envs`` > 1 the task (same layout) runs in that many worker processes
+    (:class:`~torchrl.envs.ParallelEnv`, one torch thread each), each rendering its own frames;
+    the embedding, history and reward transforms sit on the batched env, so one encoder forward
+    embeds all N frames of a step, and partial resets restart only the envs that ended.
 
     Args:
         task, seed: the fixed-goal task and its layout (:func:`~temporal_torchrl.envs.make_env`).
@@ -91,6 +97,8 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
         history: k when there is no reward (default 5).
         image_size, camera, fast_render, max_episode_steps: as in
             :func:`~temporal_torchrl.envs.make_env`.
+        num_envs: copies of the task stepped in parallel (batch size ``[num_envs]``); 1: a
+            single env with batch size ``[]``.
 
     Example:
         >>> from temporal_torchrl.encoders import load_encoder
@@ -102,9 +110,13 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
         >>> rollout["next", "vlm_reward"].shape, "pixels" in rollout.keys()
         (torch.Size([5, 1]), False)
     """
+    if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+        raise ValueError(f"num_envs={num_envs!r}; expected an integer >= 1.")
     render = encoder is not None and encoder.input_key == "pixels"
-    env = make_env(task, seed, render=render, image_size=image_size, camera=camera,
-                   fast_render=fast_render, max_episode_steps=max_episode_steps)
+    make_task_env = functools.partial(
+        make_env, task, seed, render=render, image_size=image_size, camera=camera,
+        fast_render=fast_render, max_episode_steps=max_episode_steps)
+    env = make_task_env() if num_envs == 1 else ParallelEnv(num_envs, make_task_env)
     if encoder is None:
         return env
     if not isinstance(env, TransformedEnv):

@@ -33,13 +33,14 @@ SUMMARY_FILE = "summary.json"
 
 #: Config keys about the process that ran a run, not about the run: where it wrote, whether it
 #: resumed, when it stopped, its progress bar and threads, its episode target and checkpoint
-#: interval (a run extended with ``train.episodes`` is the same run, longer), the encoder's
-#: device, and the logger. Runs that differ only in these (and the seed) are one configuration.
+#: interval (a run extended with ``train.episodes`` is the same run, longer), the devices,
+#: compilation, and the logger. Runs that differ only in these (and the seed) are one
+#: configuration.
 PROCESS_KEYS = ("output_dir", "resume", "overwrite", "train.stop_after_episodes",
                 "train.progress", "train.threads", "train.episodes", "train.checkpoint_every",
-                "encoder.device")
-#: Key prefixes left out like :data:`PROCESS_KEYS` (``logger.*``).
-PROCESS_PREFIXES = ("logger.",)
+                "encoder.device", "train.device", "replay_buffer.device")
+#: Key prefixes left out like :data:`PROCESS_KEYS` (``logger.*``, ``compile.*``).
+PROCESS_PREFIXES = ("logger.", "compile.")
 #: Last key component left out wherever it appears (a sweep launcher's ``runs_dir``).
 PROCESS_LEAVES = ("runs_dir",)
 #: Keys that tell the runs of one configuration apart, or put them in different table rows.

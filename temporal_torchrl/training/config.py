@@ -52,6 +52,7 @@ def _number(test: Callable[[float], bool], expected: str) -> tuple[Callable[[Any
 #: (key, check, what is expected, whether null is allowed) for the numeric settings.
 _NUMERIC_CHECKS = (
     ("env.max_episode_steps", *_integer(1), False),
+    ("env.num_envs", *_integer(1), False),
     ("reward.rho", *_number(lambda v: v >= 0, "a number >= 0"), False),
     ("reward.lambda_", *_number(lambda v: v >= 0, "a number >= 0"), False),
     ("reward.k", *_integer(1), False),
@@ -75,8 +76,8 @@ _NUMERIC_CHECKS = (
     ("train.preload_positives", *_integer(0), False),
     ("train.expert_steps_after_success", *_integer(0), True),
     ("train.random_steps", *_integer(0), False),
-    ("train.updates_per_step", *_integer(0), False),
-    ("train.reward_updates_per_step", *_integer(0), False),
+    ("train.utd_ratio", *_number(lambda v: v >= 0, "a number >= 0"), False),
+    ("train.reward_updates_per_step", *_number(lambda v: v >= 0, "a number >= 0"), False),
     ("train.checkpoint_every", *_integer(1), False),
     ("train.stop_after_episodes", *_integer(1), True),
     ("train.threads", *_integer(1), True),
@@ -84,7 +85,9 @@ _NUMERIC_CHECKS = (
 )
 
 
-_GROUPS = ("env", "encoder", "reward", "sac", "replay_buffer", "train", "logger")
+_GROUPS = ("env", "encoder", "reward", "sac", "replay_buffer", "train", "compile", "logger")
+#: torch.compile's modes (null: its default).
+COMPILE_MODES = ("default", "reduce-overhead", "max-autotune", "max-autotune-no-cudagraphs")
 
 
 EMBEDDING_DTYPES = ("float16", "bfloat16", "float32")
@@ -170,14 +173,18 @@ def validate_config(cfg: DictConfig) -> None:
         raise bad("replay_buffer.capacity", capacity,
                   f"null (the whole run) or an integer >= {longest}, the rows of the longest "
                   "episode (its steps + 1), plus the rows of any preloaded experts")
-    try:
-        device = torch.device(cfg.encoder.device)
-    except (RuntimeError, TypeError) as error:
-        raise bad("encoder.device", cfg.encoder.device, "a torch device such as cpu or "
-                  "cuda:0") from error
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise bad("encoder.device", cfg.encoder.device,
-                  "cpu: torch finds no CUDA GPU on this machine")
+    for key in ("train.device", "encoder.device", "replay_buffer.device"):
+        try:
+            resolve_device(OmegaConf.select(cfg, key), train_device=cfg.train.device)
+        except ValueError as error:
+            raise bad(key, OmegaConf.select(cfg, key), str(error)) from error
+    for key in ("compile.enabled", "compile.cudagraphs"):
+        if not isinstance(OmegaConf.select(cfg, key), bool):
+            raise bad(key, OmegaConf.select(cfg, key), "true or false")
+    if cfg.compile.mode is not None and cfg.compile.mode not in COMPILE_MODES:
+        raise bad("compile.mode", cfg.compile.mode, f"null or one of {', '.join(COMPILE_MODES)}")
+    if cfg.compile.cudagraphs and resolve_device(cfg.train.device).type != "cuda":
+        raise bad("compile.cudagraphs", True, "false: CUDA graphs need a CUDA train.device")
     if cfg.logger.backend not in LOGGER_BACKENDS:
         raise bad("logger.backend", cfg.logger.backend, f"one of {', '.join(LOGGER_BACKENDS)}")
     try:
@@ -189,6 +196,26 @@ def validate_config(cfg: DictConfig) -> None:
     if cfg.reward.certainty_scaling and directional is None:
         raise bad("reward.certainty_scaling", True, "false without a directional reward (it "
                   "scales r_D), or a reward.directional such as d3")
+
+
+def resolve_device(name: str, train_device: str | None = None) -> torch.device:
+    """``auto`` -> CUDA when torch finds a GPU, else the CPU (for ``replay_buffer.device``:
+    ``train_device``, resolved); any other name as a torch device, checked to exist.
+
+    >>> resolve_device("cpu")
+    device(type='cpu')
+    """
+    if name == "auto":
+        if train_device is not None:
+            return resolve_device(train_device)
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError) as error:
+        raise ValueError("auto or a torch device such as cpu or cuda:0") from error
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError("auto or cpu: torch finds no CUDA GPU on this machine")
+    return device
 
 
 def uses_vlm_reward(cfg: DictConfig) -> bool:

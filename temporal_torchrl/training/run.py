@@ -140,7 +140,8 @@ class RunDirectory:
         temporary.replace(self.checkpoint_path)
 
     def load_checkpoint(self) -> dict[str, Any]:
-        return torch.load(self.checkpoint_path, weights_only=True)
+        """The saved state, on the CPU (``load_state_dict`` copies it to the modules' devices)."""
+        return torch.load(self.checkpoint_path, map_location="cpu", weights_only=True)
 
     def write_summary(self, summary: dict[str, Any]) -> None:
         write_json(self.path / "summary.json", summary)
@@ -157,16 +158,19 @@ def write_json(path: Path, payload: dict[str, Any]) -> None:
 
 
 def rng_state() -> dict[str, Any]:
-    """torch, Python and NumPy generator states, as tensors and plain values
-    (``torch.load(..., weights_only=True)`` reads them back)."""
+    """torch (CPU and every GPU), Python and NumPy generator states, as tensors and plain
+    values (``torch.load(..., weights_only=True)`` reads them back)."""
     _, keys, position, has_gauss, cached = np.random.get_state()
     return {"torch": torch.get_rng_state(), "python": random.getstate(),
+            "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else [],
             "numpy": {"keys": torch.from_numpy(keys.astype(np.int64)), "position": position,
                       "has_gauss": has_gauss, "cached": cached}}
 
 
 def set_rng_state(state: dict[str, Any]) -> None:
     torch.set_rng_state(state["torch"])
+    if state.get("cuda") and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
     random.setstate(state["python"])
     numpy_state = state["numpy"]
     np.random.set_state(("MT19937", numpy_state["keys"].numpy().astype(np.uint32),

@@ -33,6 +33,7 @@ class RewardHeadTrainer:
         batch_size: states per group (``reward.batch_size``).
         lr, delta, l2_margin, same_position: ``reward.lr``, and the losses' settings of the
             same names.
+        compile, compile_mode: run each loss through ``torch.compile`` (with that mode).
 
     Example:
         >>> import torch
@@ -54,14 +55,19 @@ class RewardHeadTrainer:
     def __init__(self, reward: TemporalReward, goal_image_embedding: Tensor,
                  replay: ReplayBuffer, *, batch_size: int = 256,
                  lr: float = HEADS_LEARNING_RATE, delta: float = 0.1, l2_margin: float = 0.2,
-                 same_position: bool = True) -> None:
+                 same_position: bool = True, compile: bool = False,
+                 compile_mode: str | None = None) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size={batch_size!r}; expected an integer >= 1.")
         self.reward = reward
         self.replay = replay
         self.batch_size = batch_size
-        self.losses = finetuning_losses(reward, goal_image_embedding, delta=delta,
-                                        l2_margin=l2_margin, same_position=same_position)
+        device = reward.goal_embedding.device
+        self.losses = [loss.to(device) for loss in finetuning_losses(
+            reward, torch.as_tensor(goal_image_embedding).to(device), delta=delta,
+            l2_margin=l2_margin, same_position=same_position)]
+        self._forwards = [torch.compile(loss, mode=compile_mode) if compile else loss
+                          for loss in self.losses]
         # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on a
         # CPU (1.3 ms vs 9 ms a step).
         self.optimizers = [torch.optim.Adam(loss.parameters(), lr=lr, fused=True)
@@ -76,8 +82,9 @@ class RewardHeadTrainer:
         """One finetuning batch, one step per loss; returns the loss terms and the ``stage``."""
         batch = self.replay.sample(self.batch_size)
         metrics = TensorDict({}, [])
-        for loss, optimizer in zip(self.losses, self.optimizers, strict=True):
-            loss_td = loss(batch)
+        for loss, forward, optimizer in zip(self.losses, self._forwards, self.optimizers,
+                                            strict=True):
+            loss_td = forward(batch)
             value = loss_td[loss.loss_key]
             if value.requires_grad:
                 optimizer.zero_grad(set_to_none=True)

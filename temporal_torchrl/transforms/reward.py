@@ -33,8 +33,11 @@ class TemporalRewardTransform(Transform):
       stored embeddings and success, so they can always be recomputed. A tensordict without a
       ``"next"`` entry is relabelled at its root.
 
-    The transform holds the :class:`TemporalReward` (``.reward``) as a submodule; in a batched
-    env put it on the outer env so the workers do not run stale copies of the heads.
+    The transform refers to the :class:`TemporalReward` (``.reward``) without owning it: the
+    reward stays on the device it was put on (the training device), whatever device the env
+    moves its transforms to, and inputs are moved to it and rewards back to the batch's device.
+    In a batched env put the transform on the outer env so the workers do not run stale copies
+    of the heads.
 
     Example:
         >>> import torch
@@ -56,7 +59,9 @@ class TemporalRewardTransform(Transform):
         input_keys = INPUT_KEYS + ((WINDOW_KEY,) if reward.window_length else ())
         super().__init__(in_keys=list(input_keys), out_keys=list(REWARD_KEYS))
         self.input_keys = input_keys
-        self.reward = reward
+        # Referenced, not registered: an env's ``.to(device)`` must not move the heads the
+        # trainer updates on the training device.
+        self.__dict__["reward"] = reward
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
         inputs = [next_tensordict.get(key, None) for key in self.input_keys]
@@ -70,10 +75,11 @@ class TemporalRewardTransform(Transform):
                 f"TemporalRewardTransform: missing {missing} (needs {list(self.input_keys)}). In "
                 "an env put EmbeddingTransform and EmbeddingHistoryTransform before it; a stored "
                 f"batch must keep those keys under 'next'{window}.")
+        device = self.reward.goal_embedding.device
         with torch.no_grad():
-            rewards = self.reward(*inputs)
+            rewards = self.reward(*(value.to(device, non_blocking=True) for value in inputs))
         for key, value in rewards.items():
-            next_tensordict.set(key, value)
+            next_tensordict.set(key, value.to(inputs[0].device, non_blocking=True))
         return next_tensordict
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase

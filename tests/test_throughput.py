@@ -1,0 +1,114 @@
+"""Throughput options: several envs per run (batched transforms, partial resets, per-env
+episodes, the update-to-data ratio), devices through one code path, and compiled updates that
+match eager ones."""
+
+import pytest
+import sac_temporal
+import torch
+import utils
+from test_recipe import config, episode_rows
+
+from temporal_torchrl.encoders import load_encoder
+from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
+from temporal_torchrl.training import RunDirectory
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_batched_env_keeps_each_envs_history_across_resets():
+    """Two worker envs, 4-step episodes, k = 2: s_{t-k} and s_0 of every env and step are read
+    off that env's own embeddings, clamped at each episode's start, and the reward is the
+    single-state reward of those inputs."""
+    encoder = load_encoder("state", dim=8)
+    reward = make_temporal_reward("drawer-open", encoder, positional="furl", directional="d3",
+                                  rho=1.0, lambda_=2.0, k=2)
+    env = make_temporal_env("drawer-open", encoder=encoder, reward=reward, max_episode_steps=4,
+                            num_envs=2)
+    try:
+        rollout = env.rollout(10, break_when_any_done=False)  # [2, 10]: resets after steps 4, 8
+    finally:
+        env.close()
+    assert rollout.batch_size == (2, 10)
+    for index in range(2):
+        steps = rollout[index]
+        for t in range(10):
+            episode_step = t % 4 + 1  # s_1 .. s_4 within each episode
+            start = t - (episode_step - 1)  # the transition that left s_0
+            s_0 = steps["embedding"][start]
+            expected_previous = (steps["next", "embedding"][t - 2] if episode_step > 2 else s_0)
+            torch.testing.assert_close(steps["next", "initial_embedding"][t], s_0)
+            torch.testing.assert_close(steps["next", "previous_embedding"][t], expected_previous)
+        nxt = steps["next"]
+        with torch.no_grad():
+            expected = reward(nxt["embedding"], nxt["initial_embedding"],
+                              nxt["previous_embedding"], nxt["success"])["reward"]
+        torch.testing.assert_close(nxt["reward"], expected)
+    # the two envs act independently (different random actions)
+    assert not torch.equal(rollout[0]["next", "observation"], rollout[1]["next", "observation"])
+
+
+@pytest.mark.parametrize(("utd_ratio", "expected_updates"), [(1, 40), (0.5, 20)])
+def test_several_envs_insert_every_episode_and_keep_the_update_ratio(tmp_path, utd_ratio,
+                                                                     expected_updates):
+    """2 envs, 20-step episodes, 4 episodes = 40 vector steps. The first episodes end at vector
+    step 20 (insertion after that step's updates), so updates run on vector steps 21..40:
+    20 x 2 envs x utd_ratio."""
+    cfg = config(tmp_path, "env.num_envs=2", "train.episodes=4", "train.random_steps=10",
+                 "reward.directional=d3", f"train.utd_ratio={utd_ratio}")
+    summary = sac_temporal.train(cfg)
+    assert summary["updates"] == expected_updates
+    assert summary["env_steps"] == 80 and summary["episodes"] == 4
+    rows = episode_rows(tmp_path / "run")
+    assert [int(row["env_steps"]) for row in rows] == [40, 40, 80, 80]
+    state = RunDirectory(tmp_path / "run").load_checkpoint()
+    assert state["inserted"] == 4
+    stored = list(RunDirectory(tmp_path / "run").replay_episodes(4))
+    assert [len(episode) for episode in stored] == [21] * 4
+    # the two envs of one round stored different trajectories
+    assert not torch.equal(stored[0]["observation"], stored[1]["observation"])
+
+
+def test_several_envs_resume_like_the_uninterrupted_run(tmp_path):
+    common = ["env.num_envs=2", "train.episodes=4", "reward.directional=d3"]
+    straight = sac_temporal.train(config(tmp_path / "a", *common))
+    sac_temporal.train(config(tmp_path / "b", *common, "train.stop_after_episodes=2"))
+    resumed = sac_temporal.train(config(tmp_path / "b", "resume=true", "train.episodes=4"))
+    assert resumed["successes"] == straight["successes"]
+    assert episode_rows(tmp_path / "a" / "run") == episode_rows(tmp_path / "b" / "run")
+    first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint()
+                     for name in ("a", "b"))
+    for key, value in first["sac_loss"].items():
+        torch.testing.assert_close(second["sac_loss"][key], value, msg=key)
+
+
+def test_compiled_sac_update_matches_the_eager_one(tmp_path, monkeypatch):
+    """torch.compile (inductor, CPU) of the SAC update: the same parameters after 3 updates on
+    the same batches, within float tolerance (inductor drawing its random numbers as eager does:
+    the update samples actions)."""
+    import torch._inductor.config as inductor_config
+
+    monkeypatch.setattr(inductor_config, "fallback_random", True)
+    cfg = config(tmp_path, "reward.directional=d3")
+    env = utils.make_environment(cfg, None, None)
+    results = []
+    batches = [env.rollout(16, break_when_any_done=False) for _ in range(3)]
+    for compiled in (False, True):
+        cfg.compile.enabled = compiled
+        torch.manual_seed(0)
+        actor, qvalue = utils.make_sac_agent(cfg, env)
+        loss, updater, optimizer = utils.make_sac_loss(cfg, actor, qvalue, 4)
+        update = utils.make_sac_update(cfg, loss, updater, optimizer)
+        losses = [update(batch.clone())["loss_qvalue"] for batch in batches]
+        results.append(([p.detach().clone() for p in loss.parameters()], losses))
+    env.close()
+    (eager_params, eager_losses), (compiled_params, compiled_losses) = results
+    for eager, compiled in zip(eager_losses, compiled_losses, strict=True):
+        torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
+    for eager, compiled in zip(eager_params, compiled_params, strict=True):
+        torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
