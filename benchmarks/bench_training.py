@@ -5,8 +5,8 @@ Sections (``--sections``, default all), each row next to its reference measured 
 step    the training step alone, as the recipe runs it: one reward-head update (FuRL's ranking
         loss and D3's directional loss, stage 2: every loss term active), one SAC batch sampled
         and relabelled, one SAC update; batch 256, D = 1024. Eager and compiled
-        (``torch.compile``), each against the compute bound: the step's FLOPs (counted with
-        ``torch.utils.flop_counter.FlopCounterMode``) divided by this machine's fp32 GEMM
+        (``torch.compile``), each against the compute bound: the step's FLOPs (counted by
+        ``torch.profiler`` with ``with_flops=True``: matmuls) divided by this machine's fp32 GEMM
         throughput (a 2048^3 matmul, measured); the achieved fraction of that bound.
 loop    the whole recipe (``recipes/sac_temporal.py``'s ``train``), env steps/s in the steady
         state (the 3rd and 4th rounds of episodes: runs of 2 and 4 rounds, differenced, so build,
@@ -35,7 +35,7 @@ import torch
 from _common import machine_description, report, seconds_per_call
 from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
-from torch.utils.flop_counter import FlopCounterMode
+from torch.profiler import ProfilerActivity, profile
 from torchrl.data import LazyTensorStorage, SliceSampler, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
@@ -73,10 +73,11 @@ def synthetic_episode(length: int, dim: int, success_from: int | None = None) ->
 
 
 # --------------------------------------------------------------------------- step
-def training_step(compiled: bool, tmp: Path):
+def training_step(compiled: bool, tmp: Path, mode: str | None = None):
     """The recipe's step (head update, SAC batch + relabel, SAC update) on a stage-2 buffer."""
     cfg = recipe_config(tmp / "step", "encoder.name=state", "+encoder.options.dim=1024",
-                        f"compile.enabled={str(compiled).lower()}")
+                        f"compile.enabled={str(compiled).lower()}",
+                        f"compile.mode={mode or 'null'}")
     torch.manual_seed(0)
     encoder = utils.make_encoder(cfg)
     reward = utils.make_reward(cfg, encoder)
@@ -105,16 +106,17 @@ def gemm_flops_per_second(size: int = 2048) -> float:
     return 2 * size ** 3 / seconds
 
 
-def step_rows(tmp: Path, quick: bool) -> list[dict]:
+def step_rows(tmp: Path, quick: bool, mode: str | None) -> list[dict]:
     minimum = 1.0 if quick else 5.0
     eager = training_step(False, tmp)
-    with FlopCounterMode(display=False) as counter:
+    eager()
+    with profile(activities=[ProfilerActivity.CPU], with_flops=True) as profiler:
         eager()
-    flops = counter.get_total_flops()
+    flops = sum(event.flops for event in profiler.key_averages())
     peak = gemm_flops_per_second()
     bound = flops / peak
     eager_seconds = seconds_per_call(eager, min_seconds=minimum, warmup_calls=5)
-    compiled = training_step(True, tmp)
+    compiled = training_step(True, tmp, mode)
     start = time.perf_counter()
     for _ in range(3):  # compilation, and the recompile at the first stage-2 graph
         compiled()
@@ -138,9 +140,9 @@ def step_rows(tmp: Path, quick: bool) -> list[dict]:
 
 # --------------------------------------------------------------------------- loop
 ENCODERS = {  # name: (overrides, episode length, quick episode length)
-    "state encoder, D=1024": (("encoder.name=state", "+encoder.options.dim=1024"), 50, 20),
-    "shipped encoder, 64 px": (("encoder.name=metaworld_small", "env.image_size=64"), 50, 20),
-    "random LIV, 224 px": (("encoder.name=liv", "env.image_size=224"), 16, 8),
+    "state encoder, D=1024": (("encoder.name=state", "+encoder.options.dim=1024"), 40, 20),
+    "shipped encoder, 64 px": (("encoder.name=metaworld_small", "env.image_size=64"), 40, 20),
+    "random LIV, 224 px": (("encoder.name=liv", "env.image_size=224"), 12, 8),
 }
 
 
@@ -160,7 +162,7 @@ def steady_steps_per_second(cfg_overrides: list[str], num_envs: int, length: int
     return (steps[1] - steps[0]) / (times[1] - times[0])
 
 
-def loop_rows(tmp: Path, quick: bool, skip_liv: bool) -> list[dict]:
+def loop_rows(tmp: Path, quick: bool, skip_liv: bool, mode: str | None) -> list[dict]:
     from temporal_torchrl.encoders import save_random_liv_checkpoint
 
     checkpoint = tmp / "liv.pt"
@@ -176,8 +178,8 @@ def loop_rows(tmp: Path, quick: bool, skip_liv: bool) -> list[dict]:
         for compiled in (False, True):
             for num_envs in ((1, 2) if quick else (1, 2, 4)):
                 rate = steady_steps_per_second(
-                    [*overrides, f"compile.enabled={str(compiled).lower()}"], num_envs, length,
-                    tmp)
+                    [*overrides, f"compile.enabled={str(compiled).lower()}",
+                     f"compile.mode={mode or 'null'}"], num_envs, length, tmp)
                 today = rate if today is None else today
                 print(f"loop: {name}, {num_envs} envs, compiled={compiled}: {rate:.1f}/s",
                       flush=True)
@@ -290,6 +292,9 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=os.cpu_count(),
                         help="torch threads (default: all cores)")
     parser.add_argument("--skip-liv", action="store_true", help="no LIV loop rows")
+    parser.add_argument("--compile-mode", default="max-autotune",
+                        help="torch.compile mode of the compiled rows (default: max-autotune, "
+                             "the mode that pays off on a CPU)")
     args = parser.parse_args()
     sections = args.sections.split(",")
     if unknown := set(sections) - set(SECTIONS):
@@ -300,9 +305,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if "step" in sections:
-            rows += step_rows(tmp, args.quick)
+            rows += step_rows(tmp, args.quick, args.compile_mode)
         if "loop" in sections:
-            rows += loop_rows(tmp, args.quick, args.skip_liv)
+            rows += loop_rows(tmp, args.quick, args.skip_liv, args.compile_mode)
         if "reference" in sections:
             rows += reference_rows(tmp, args.quick)
     if "replay" in sections:

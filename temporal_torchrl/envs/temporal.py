@@ -10,6 +10,7 @@ the README) to change the order or add your own.
 from __future__ import annotations
 
 import functools
+import os
 from typing import Any
 
 from tensordict import TensorDict
@@ -113,10 +114,14 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs={num_envs!r}; expected an integer >= 1.")
     render = encoder is not None and encoder.input_key == "pixels"
-    make_task_env = functools.partial(
-        make_env, task, seed, render=render, image_size=image_size, camera=camera,
-        fast_render=fast_render, max_episode_steps=max_episode_steps)
-    env = make_task_env() if num_envs == 1 else ParallelEnv(num_envs, make_task_env)
+    settings = {"render": render, "image_size": image_size, "camera": camera,
+                "fast_render": fast_render, "max_episode_steps": max_episode_steps}
+    if num_envs == 1:
+        env = make_env(task, seed, **settings)
+    else:
+        rasteriser_threads = max(1, (os.cpu_count() or 1) // num_envs)
+        env = ParallelEnv(num_envs, functools.partial(_worker_env, task, seed,
+                                                      rasteriser_threads, **settings))
     if encoder is None:
         return env
     if not isinstance(env, TransformedEnv):
@@ -128,6 +133,14 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     if reward is not None:
         env.append_transform(TemporalRewardTransform(reward))
     return env
+
+
+def _worker_env(task: str, seed: int, rasteriser_threads: int, **settings: Any) -> EnvBase:
+    """A ParallelEnv worker's env. Its software rasteriser (Mesa llvmpipe, before any GL
+    context exists) gets its share of the cores, so N rendering workers do not oversubscribe
+    them; its torch threads are set by ParallelEnv (one each)."""
+    os.environ["LP_NUM_THREADS"] = str(rasteriser_threads)
+    return make_env(task, seed, **settings)
 
 
 def collect_successful_experts(task: str, seed: int, count: int, *, render: bool = False,
