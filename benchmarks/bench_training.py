@@ -9,10 +9,10 @@ step    the training step alone, as the recipe runs it: one reward-head update (
         ``torch.profiler`` with ``with_flops=True``: matmuls) divided by this machine's fp32 GEMM
         throughput (a 2048^3 matmul, measured); the achieved fraction of that bound.
 loop    the whole recipe (``recipes/sac_temporal.py``'s ``train``), env steps/s in the steady
-        state (the 3rd and 4th rounds of episodes: runs of 2 and 4 rounds, differenced, so build,
-        warm-up and compilation cancel out) for the state encoder (D = 1024), the shipped encoder
-        at 64 px and a random-weight LIV at 224 px; ``env.num_envs`` 1, 2 and 4, eager and
-        compiled; against today's loop (one env, eager) of the same encoder.
+        state (the 3rd and 4th rounds of ``num_envs`` episodes, timed at the episode ends: the
+        1st round has no updates, the 2nd compiles) for the state encoder (D = 1024), the
+        shipped encoder at 64 px and a random-weight LIV at 224 px; ``env.num_envs`` 1, 2
+        and 4, eager and compiled; against today's loop (one env, eager) of the same encoder.
 reference  the recipe without a VLM reward against a plain TorchRL SAC loop on the same env
         (TensorDictReplayBuffer, same networks and schedule): the recipe's own overhead.
 replay  sampling 256 transitions with their histories at 500,000 transitions (D = 1024) against
@@ -140,26 +140,34 @@ def step_rows(tmp: Path, quick: bool, mode: str | None) -> list[dict]:
 
 # --------------------------------------------------------------------------- loop
 ENCODERS = {  # name: (overrides, episode length, quick episode length)
-    "state encoder, D=1024": (("encoder.name=state", "+encoder.options.dim=1024"), 40, 20),
-    "shipped encoder, 64 px": (("encoder.name=metaworld_small", "env.image_size=64"), 40, 20),
-    "random LIV, 224 px": (("encoder.name=liv", "env.image_size=224"), 12, 8),
+    "state encoder, D=1024": (("encoder.name=state", "+encoder.options.dim=1024"), 100, 20),
+    "shipped encoder, 64 px": (("encoder.name=metaworld_small", "env.image_size=64"), 100, 20),
+    "random LIV, 224 px": (("encoder.name=liv", "env.image_size=224"), 24, 8),
 }
 
 
 def steady_steps_per_second(cfg_overrides: list[str], num_envs: int, length: int,
                             tmp: Path) -> float:
-    """Env steps/s over the 3rd and 4th rounds of ``num_envs`` episodes: runs of 2 and 4
-    rounds, differenced (build, the first round without updates, and compilation cancel)."""
-    times, steps = [], []
-    for rounds in (2, 4):
-        run_dir = tmp / f"loop_{len(os.listdir(tmp))}"
-        cfg = recipe_config(run_dir, *cfg_overrides, f"env.num_envs={num_envs}",
-                            f"env.max_episode_steps={length}",
-                            f"train.episodes={rounds * num_envs}")
-        summary = sac_temporal.train(cfg)
-        steps.append(summary["env_steps"])
-        times.append(summary["env_steps"] / summary["steps_per_second"])
-    return (steps[1] - steps[0]) / (times[1] - times[0])
+    """Env steps/s over the 3rd and 4th rounds of ``num_envs`` episodes of one run, timed at
+    the episode ends the recipe logs (the first round has no updates, the second compiles)."""
+    clock: dict[int, float] = {}
+    log_metrics = sac_temporal.log_metrics
+
+    def timed(logger, metrics: dict, step: int) -> None:
+        if "train/success" in metrics:
+            clock[step] = time.perf_counter()
+        log_metrics(logger, metrics, step)
+
+    cfg = recipe_config(tmp / f"loop_{len(os.listdir(tmp))}", *cfg_overrides,
+                        f"env.num_envs={num_envs}", f"env.max_episode_steps={length}",
+                        "train.episodes=" + str(4 * num_envs))
+    sac_temporal.log_metrics = timed
+    try:
+        sac_temporal.train(cfg)
+    finally:
+        sac_temporal.log_metrics = log_metrics
+    second, fourth = 2 * num_envs * length, 4 * num_envs * length
+    return (fourth - second) / (clock[fourth] - clock[second])
 
 
 def loop_rows(tmp: Path, quick: bool, skip_liv: bool, mode: str | None) -> list[dict]:

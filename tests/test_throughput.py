@@ -112,3 +112,24 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path, monkeypatch):
         torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
     for eager, compiled in zip(eager_params, compiled_params, strict=True):
         torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
+
+
+def test_rendering_workers_embed_their_own_frames():
+    """Each worker renders (EGL) its own env; one encoder forward embeds both frames, which
+    match the single-env pipeline's frame after the same first action."""
+    encoder = load_encoder("metaworld_small")
+    batched = make_temporal_env("drawer-open", encoder=encoder, image_size=32,
+                                max_episode_steps=5, num_envs=2)
+    single = make_temporal_env("drawer-open", encoder=encoder, image_size=32,
+                               max_episode_steps=5)
+    try:
+        start = batched.reset()
+        reference = single.reset()
+    finally:
+        batched.close()
+        single.close()
+    assert start["embedding"].shape == (2, encoder.dim) and "pixels" not in start.keys()
+    # the same layout: every worker's first frame is the single env's
+    for index in range(2):
+        torch.testing.assert_close(start["embedding"][index], reference["embedding"],
+                                   rtol=1e-4, atol=1e-4)

@@ -278,33 +278,21 @@ class EpisodeWriter(Writer):
         return self._storage.get(slice(None))
 
     def rows(self) -> dict[str, torch.Tensor]:
-        """The sampleable row sets, cached per write (CPU ``int64`` tensors):
-
-        ``transitions`` (valid rows that are not an episode's last) and their ``steps``
-        (``int32``);
-        ``positives`` and ``negatives`` (valid labelled states, ordered oldest episode first)
-        and their ``positive_steps`` / ``negative_steps``.
-        """
+        """The sampleable transitions, cached per write (CPU ``int32`` tensors):
+        ``transitions`` (valid rows that are not an episode's last) and their ``steps``."""
         if self._derived is None:
             self._derived = self._derive()
         return self._derived
 
     def _derive(self) -> dict[str, torch.Tensor]:
-        empty = torch.zeros(0, dtype=torch.int64)
         if not self.episodes:
-            return dict.fromkeys(("transitions", "steps", "positives", "positive_steps",
-                                  "negatives", "negative_steps"), empty)
-        columns = self.columns().select("last", "label", "step", "episode").cpu()
-        valid = self._valid[:columns.shape[0]]
-        step = columns["step"].int()
+            empty = torch.zeros(0, dtype=torch.int32)
+            return {"transitions": empty, "steps": empty}
+        columns = self.columns().select("last", "step").cpu()
         # int32 rows and steps: a 1,000,000-row buffer keeps 8 MB of index sets, not 16.
-        transitions = torch.nonzero(valid & ~columns["last"]).reshape(-1).int()
-        derived = {"transitions": transitions, "steps": step[transitions]}
-        for name, label in (("positive", POSITIVE), ("negative", NEGATIVE)):
-            rows = torch.nonzero(valid & (columns["label"] == label)).reshape(-1)
-            rows = rows[torch.argsort(columns["episode"][rows], stable=True)].int()
-            derived[name + "s"], derived[name + "_steps"] = rows, step[rows]
-        return derived
+        transitions = torch.nonzero(self._valid[:columns.shape[0]] & ~columns["last"])
+        transitions = transitions.reshape(-1).int()
+        return {"transitions": transitions, "steps": columns["step"][transitions].int()}
 
     @property
     def has_positives(self) -> bool:
@@ -471,13 +459,23 @@ class FinetuningSampler(_EpisodeRowSampler):
         self._version, self._candidates = -1, {}
 
     def candidates(self) -> dict[str, torch.Tensor]:
-        """Rows and steps of each group's candidates (cached per write)."""
+        """Rows and steps (``int32``) of each group's candidates (cached per write)."""
+        if self._version != self.writer.version and not self.writer.episodes:
+            empty = torch.zeros(0, dtype=torch.int32)
+            self._candidates = dict.fromkeys(("positive", "positive_steps", "negative",
+                                              "negative_steps", "pair", "pair_steps"), empty)
+            self._version = self.writer.version
         if self._version != self.writer.version:
-            rows, candidates = self.writer.rows(), {}
-            for name in ("positive", "negative"):
-                recent = slice(-self.label_window, None) if self.label_window else slice(None)
-                candidates[name] = rows[name + "s"][recent]
-                candidates[name + "_steps"] = rows[name + "_steps"][recent]
+            candidates = {}
+            columns = self.writer.columns().select("label", "step", "episode").cpu()
+            valid = self.writer.valid[:columns.shape[0]]
+            for name, label in (("positive", POSITIVE), ("negative", NEGATIVE)):
+                rows = torch.nonzero(valid & (columns["label"] == label)).reshape(-1)
+                rows = rows[torch.argsort(columns["episode"][rows], stable=True)]
+                if self.label_window is not None:
+                    rows = rows[-self.label_window:]
+                candidates[name] = rows.int()
+                candidates[name + "_steps"] = columns["step"][rows].int()
             later = candidates["positive_steps"] > self.gap
             candidates["pair"] = candidates["positive"][later]
             candidates["pair_steps"] = candidates["positive_steps"][later]
@@ -583,8 +581,7 @@ class FinetuningLayout(Transform):
         self.window_length = window_length
         self.device = torch.device(device) if device is not None else None
 
-    def _states(self, rows: TensorDictBase) -> TensorDict:
-        embeddings = _embeddings(rows, slice(None))
+    def _states(self, rows: TensorDictBase, embeddings: torch.Tensor) -> TensorDict:
         states = {"embedding": embeddings[:, 0], "initial_embedding": embeddings[:, 1],
                   "previous_embedding": embeddings[:, 2], "label": rows["label"][:, 0],
                   "step": rows["step"][:, 0].long(), "episode": rows["episode"][:, 0]}
@@ -594,14 +591,19 @@ class FinetuningLayout(Transform):
 
     def forward(self, rows: TensorDictBase) -> TensorDictBase:
         batch = TensorDict({}, rows.shape[1:2], device=rows.device)
+        embeddings = _embeddings(rows, slice(None))  # one conversion for every group
         group = iter(range(rows.shape[0]))
+
+        def states() -> TensorDict:
+            index = next(group)
+            return self._states(rows[index], embeddings[index])
+
         for name in self.groups():
             if name == "positive_pair":
-                batch[name] = TensorDict({"later": self._states(rows[next(group)]),
-                                          "earlier": self._states(rows[next(group)])},
+                batch[name] = TensorDict({"later": states(), "earlier": states()},
                                          rows.shape[1:2])
             else:
-                batch[name] = self._states(rows[next(group)])
+                batch[name] = states()
         return _to_device(batch, self.device)
 
 
@@ -694,5 +696,6 @@ class EpisodeReplayBuffer(ReplayBuffer):
                          .values(include_nested=True, leaves_only=True))
             # ``get`` views the written rows; the storage holds ``capacity`` of them.
             stored = stored * self.capacity // len(self.storage)
-        bookkeeping = [self.writer.valid, *self.writer.rows().values()]
+        bookkeeping = [self.writer.valid, *self.writer.rows().values(),
+                       *self.finetuning.sampler.candidates().values()]
         return stored + sum(t.numel() * t.element_size() for t in bookkeeping)

@@ -13,6 +13,7 @@ import functools
 import os
 from typing import Any
 
+import torch
 from tensordict import TensorDict
 from torchrl.envs import EnvBase, ParallelEnv, TransformedEnv
 
@@ -86,7 +87,8 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     ``reward`` (or ``history`` without one), and the window a d_sequence reward reads.
 
     With ``num_envs`` > 1 the task (same layout) runs in that many worker processes
-    (:class:`~torchrl.envs.ParallelEnv`, one torch thread each), each rendering its own frames;
+    (:class:`~torchrl.envs.ParallelEnv`, one torch thread and cores / N rasteriser threads
+    each), each rendering its own frames;
     the embedding, history and reward transforms sit on the batched env, so one encoder forward
     embeds all N frames of a step, and partial resets restart only the envs that ended.
 
@@ -120,8 +122,11 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
         env = make_env(task, seed, **settings)
     else:
         rasteriser_threads = max(1, (os.cpu_count() or 1) // num_envs)
+        # The collector steps the workers and then updates, never both at once: this process
+        # keeps its torch threads for the updates (ParallelEnv would give it cores - workers).
         env = ParallelEnv(num_envs, functools.partial(_worker_env, task, seed,
-                                                      rasteriser_threads, **settings))
+                                                      rasteriser_threads, **settings),
+                          num_threads=torch.get_num_threads())
     if encoder is None:
         return env
     if not isinstance(env, TransformedEnv):
