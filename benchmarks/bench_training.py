@@ -12,7 +12,8 @@ loop    the whole recipe (``recipes/sac_temporal.py``'s ``train``), env steps/s 
         state (the 3rd and 4th rounds of ``num_envs`` episodes, timed at the episode ends: the
         1st round has no updates, the 2nd compiles) for the state encoder (D = 1024), the
         shipped encoder at 64 px and a random-weight LIV at 224 px; ``env.num_envs`` 1, 2
-        and 4, eager and compiled; against today's loop (one env, eager) of the same encoder.
+        and 4, eager and compiled; against today's loop (one env, eager) of the same encoder;
+        with CUDA also LIV with 16 envs, everything on the GPU, compiled.
 reference  the recipe without a VLM reward against a plain TorchRL SAC loop on the same env
         (TensorDictReplayBuffer, same networks and schedule): the recipe's own overhead.
 replay  sampling 256 transitions with their histories at 500,000 transitions (D = 1024) against
@@ -196,6 +197,16 @@ def loop_rows(tmp: Path, quick: bool, skip_liv: bool, mode: str | None) -> list[
                              "project": rate, "reference": today,
                              "reference is": "one env, eager (today's loop)",
                              "ratio": rate / today})
+        if torch.cuda.is_available() and "LIV" in name and not quick:
+            # The GPU row: everything on the GPU, 16 rendering workers, compiled updates.
+            rate = steady_steps_per_second(
+                [*overrides, "train.device=cuda", "compile.enabled=true",
+                 f"compile.mode={mode or 'null'}"], 16, length, tmp)
+            rows.append({"measure": f"whole loop, {name}, 16 envs, compiled, "
+                                    f"{torch.cuda.get_device_name(0)} (env steps/s)",
+                         "project": rate, "reference": today,
+                         "reference is": "one env, eager, CPU (today's loop)",
+                         "ratio": rate / today})
     return rows
 
 
