@@ -16,9 +16,7 @@ from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
-from torchrl.record.loggers import Logger
-from torchrl.record.loggers.csv import CSVLogger
-from torchrl.record.loggers.wandb import WandbLogger
+from torchrl.record.loggers import CSVLogger, Logger, WandbLogger
 
 from temporal_torchrl.data import EpisodeReplayBuffer, embed_episode
 from temporal_torchrl.encoders import Encoder, load_encoder
