@@ -57,7 +57,7 @@ from temporal_torchrl.evaluation import (
     variant_reward,
 )
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
-from temporal_torchrl.training.config import import_reward_modules
+from temporal_torchrl.training.config import import_reward_modules, resolve_device
 
 _GROUPS = ("env", "encoder", "reward", "dataset", "finetune")
 
@@ -167,17 +167,15 @@ def validate_config(cfg: DictConfig) -> None:
                    "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "
                    "episodes of each kind, and a kind needs 2 to appear in both the training "
                    "and the held-out part)")
-    if not isinstance(cfg.reward.baseline, str) or not cfg.reward.baseline.strip():
-        raise _bad("reward.baseline", cfg.reward.baseline, "generic, tailored or a text")
-    if cfg.reward.baseline == "tailored":
-        lacking = [task for task in tasks if get_task(task).tailored_baseline is None]
-        if lacking:
-            raise _bad("reward.baseline", "tailored", f"generic or a text: {', '.join(lacking)} "
-                       "has no tailored baseline (only the thesis's six evaluation tasks do)")
-    device = torch.device(cfg.encoder.device)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise _bad("encoder.device", cfg.encoder.device,
-                   "cpu: torch finds no CUDA GPU on this machine")
+    for task in tasks:
+        try:
+            baseline_text(task, cfg.reward.baseline)
+        except ValueError as error:
+            raise ValueError(f"config reward.baseline: {error}") from error
+    try:
+        resolve_device(cfg.encoder.device)
+    except ValueError as error:
+        raise _bad("encoder.device", cfg.encoder.device, str(error)) from error
 
 
 def task_config(cfg: DictConfig, task: str) -> DictConfig:

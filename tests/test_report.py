@@ -48,12 +48,7 @@ SEED0 = [False] * 150 + [True] * 150
 SEED1 = [False] * 160 + [True, False] * 70
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @cache

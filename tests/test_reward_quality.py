@@ -31,13 +31,7 @@ RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Tiny networks run fastest on one thread (see tests/test_recipe.py)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 # --------------------------------------------------------------------------- metrics
@@ -341,8 +335,10 @@ def test_recipe_writes_a_summary_for_several_tasks(tmp_path):
     ("dataset.held_out_fraction=1.5", "dataset.held_out_fraction"),
     ("dataset.expert_episodes=1", "dataset.expert_episodes"),
     ("dataset.failed_expert_episodes=1 dataset.random_episodes=1", "dataset.random_episodes"),
+    ("encoder.device=gpu", "encoder.device"),
+    ("env.task=reach reward.baseline=tailored", "reward.baseline"),
 ])
 def test_bad_config_stops_before_any_work(tmp_path, override, key):
-    with pytest.raises(ValueError, match=f"config {key}="):
+    with pytest.raises(ValueError, match=f"config {key}[=:]"):
         evaluate_rewards.evaluate(config(tmp_path, *override.split()))
     assert not (tmp_path / "cache").exists()

@@ -12,13 +12,7 @@ from temporal_torchrl.encoders import load_encoder
 from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
 from temporal_torchrl.training import RunDirectory
 
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def test_batched_env_keeps_each_envs_history_across_resets():

@@ -79,6 +79,8 @@ from torchrl.data.replay_buffers import ImmutableDatasetWriter, Sampler, Writer
 from torchrl.data.replay_buffers.storages import Storage
 from torchrl.envs.transforms import Compose, Transform
 
+from temporal_torchrl.rewards.temporal import check_window_length
+
 POSITIVE = 1
 NEGATIVE = -1
 UNLABELLED = 0
@@ -205,7 +207,6 @@ class EpisodeWriter(Writer):
         # episode id -> (first row, number of rows); only episodes still readable are kept.
         self.episodes: dict[int, tuple[int, int]] = {}
         self._keys: set[str] | None = None
-        self._positive_episodes = 0
         if self._storage is not None:
             self._valid = torch.zeros(self._storage.max_size, dtype=torch.bool)
         self.version = 0
@@ -252,7 +253,6 @@ class EpisodeWriter(Writer):
         self._valid[start:start + length] = True
         self._keys = keys
         self.episodes[episode_id] = (start, length)
-        self._positive_episodes += bool((data["label"] == POSITIVE).any())
         self._next_episode += 1
         self._cursor = start + length
         self._write_count += length
@@ -263,14 +263,9 @@ class EpisodeWriter(Writer):
         return index
 
     def _invalidate_overlapping(self, start: int, stop: int) -> None:
-        labels = None
         for episode_id, (first, length) in list(self.episodes.items()):
             if first < stop and start < first + length:
                 self._valid[first:first + length] = False
-                if labels is None:
-                    labels = self.columns()["label"]
-                if bool((labels[first:first + length] == POSITIVE).any()):
-                    self._positive_episodes -= 1
                 del self.episodes[episode_id]
 
     def columns(self) -> TensorDictBase:
@@ -295,11 +290,6 @@ class EpisodeWriter(Writer):
         return {"transitions": transitions, "steps": columns["step"][transitions].int()}
 
     @property
-    def has_positives(self) -> bool:
-        """Whether a stored episode has positive states (the finetuning's stage 2)."""
-        return self._positive_episodes > 0
-
-    @property
     def valid(self) -> torch.Tensor:
         """Per storage row: whether it belongs to an episode still stored whole."""
         return self._valid
@@ -312,7 +302,7 @@ class EpisodeWriter(Writer):
         first = torch.tensor([first for first, _ in self.episodes.values()], dtype=torch.int64)
         return {"cursor": self._cursor, "permanent_rows": self._permanent_rows,
                 "next_episode": self._next_episode, "write_count": self._write_count,
-                "positive_episodes": self._positive_episodes, "valid": self._valid.clone(),
+                "valid": self._valid.clone(),
                 "episode_ids": torch.tensor(list(self.episodes), dtype=torch.int64),
                 "episode_first": first,
                 "episode_length": torch.tensor([n for _, n in self.episodes.values()],
@@ -324,7 +314,6 @@ class EpisodeWriter(Writer):
         self._permanent_rows = state_dict["permanent_rows"]
         self._next_episode = state_dict["next_episode"]
         self._write_count = state_dict["write_count"]
-        self._positive_episodes = state_dict["positive_episodes"]
         self._valid = state_dict["valid"].clone()
         self.episodes = {int(i): (int(f), int(n)) for i, f, n in zip(
             state_dict["episode_ids"], state_dict["episode_first"],
@@ -385,11 +374,7 @@ class _EpisodeRowSampler(Sampler):
     def __init__(self, writer: EpisodeWriter, history: int, window_length: int | None) -> None:
         if history < 1:
             raise ValueError(f"history={history} must be >= 1 (k, the embedding offset).")
-        if window_length is not None and (isinstance(window_length, bool)
-                                          or not isinstance(window_length, int)
-                                          or window_length < 2):
-            raise ValueError(f"window_length={window_length!r}; expected None or an integer "
-                             ">= 2 (the K embeddings s_(t-K+1) .. s_t).")
+        check_window_length(window_length, optional=True)
         self.writer = writer
         self.history = history
         self.window_length = window_length
@@ -454,6 +439,9 @@ class FinetuningSampler(_EpisodeRowSampler):
         super().__init__(writer, history, window_length)
         if gap < 1:
             raise ValueError(f"gap={gap} must be >= 1 (the positive pairs' lag).")
+        if label_window is not None and label_window < 1:
+            raise ValueError(f"label_window={label_window!r}; expected None (every labelled "
+                             "state) or an integer >= 1 (the most recent ones of each kind).")
         self.gap = gap
         self.label_window = label_window
         self._version, self._candidates = -1, {}
@@ -486,7 +474,7 @@ class FinetuningSampler(_EpisodeRowSampler):
         """The groups a batch holds now (a subset of :data:`FINETUNING_GROUPS`, in order)."""
         candidates = self.candidates()
         present = {"negative": candidates["negative"].numel() > 0,
-                   "positive": self.writer.has_positives and candidates["positive"].numel() > 0}
+                   "positive": candidates["positive"].numel() > 0}
         present["positive_pair"] = present["positive"] and candidates["pair"].numel() > 0
         return tuple(name for name in FINETUNING_GROUPS if present[name])
 
@@ -657,8 +645,16 @@ class EpisodeReplayBuffer(ReplayBuffer):
             storage=storage, writer=ImmutableDatasetWriter(), sampler=finetuning_sampler,
             transform=FinetuningLayout(finetuning_sampler.groups, window_length, batch_device),
             batch_size=finetuning_batch_size)
-        self.history = history
-        self.window_length = window_length
+
+    @property
+    def history(self) -> int:
+        """k, the offset of s_{t-k}."""
+        return self.sampler.history
+
+    @property
+    def window_length(self) -> int | None:
+        """K, the window batches carry (None: no window)."""
+        return self.sampler.window_length
 
     @property
     def capacity(self) -> int:
@@ -686,7 +682,7 @@ class EpisodeReplayBuffer(ReplayBuffer):
     @property
     def has_positives(self) -> bool:
         """Whether a stored episode has positive states (the finetuning's stage 2)."""
-        return self.writer.has_positives
+        return self.num_positive_states > 0
 
     def memory_bytes(self) -> int:
         """Bytes held by the stored rows and the writer's bookkeeping."""

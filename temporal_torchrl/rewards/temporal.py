@@ -18,6 +18,19 @@ from temporal_torchrl.rewards.registry import image_input_of
 REWARD_KEYS = ("task_reward", "positional_reward", "directional_reward", "vlm_reward", "reward")
 
 
+
+def check_window_length(window_length: int | None, *, optional: bool = False) -> None:
+    """Raise unless ``window_length`` is an integer K >= 2 (or None when ``optional``): the
+    window s_(t-K+1) .. s_t of K embeddings, shared by the reward, the history transform and
+    the replay buffer."""
+    if optional and window_length is None:
+        return
+    if isinstance(window_length, bool) or not isinstance(window_length, int) \
+            or window_length < 2:
+        expected = "None or an integer >= 2" if optional else "an integer >= 2"
+        raise ValueError(f"window_length={window_length!r}; expected {expected} (the K "
+                         "embeddings s_(t-K+1) .. s_t).")
+
 class TemporalReward(nn.Module):
     """Positional and directional VLM rewards added to the sparse task reward (thesis 4.1):
 
@@ -103,10 +116,7 @@ class TemporalReward(nn.Module):
         if projection not in PROJECTIONS:
             raise ValueError(f"projection={projection!r}; expected one of "
                              f"{', '.join(PROJECTIONS)}.")
-        if isinstance(window_length, bool) or not isinstance(window_length, int) \
-                or window_length < 2:
-            raise ValueError(f"window_length={window_length!r}; expected an integer >= 2 (a "
-                             "window of K embeddings has K - 1 steps).")
+        check_window_length(window_length)
         if not certainty_bandwidth > 0 or not certainty_prior > 0:
             raise ValueError(f"certainty_bandwidth={certainty_bandwidth!r}, certainty_prior="
                              f"{certainty_prior!r}; expected both > 0.")

@@ -10,6 +10,8 @@ from torch import Tensor
 from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
+from temporal_torchrl.rewards.temporal import check_window_length
+
 INITIAL_EMBEDDING_KEY = "initial_embedding"
 PREVIOUS_EMBEDDING_KEY = "previous_embedding"
 WINDOW_KEY = "embedding_window"
@@ -22,9 +24,7 @@ def episode_windows(embeddings: Tensor, window_length: int) -> Tensor:
     The same windows the history transform writes during collection and the replay buffer
     derives from stored rows, for a whole episode at once (scoring, tests).
     """
-    if isinstance(window_length, bool) or not isinstance(window_length, int) \
-            or window_length < 2:
-        raise ValueError(f"window_length={window_length!r}; expected an integer >= 2.")
+    check_window_length(window_length)
     steps = torch.arange(embeddings.shape[0], device=embeddings.device)
     offsets = torch.arange(window_length - 1, -1, -1, device=embeddings.device)
     return embeddings[(steps.unsqueeze(-1) - offsets).clamp_min(0)]
@@ -67,11 +67,7 @@ class EmbeddingHistoryTransform(Transform):
     def __init__(self, k: int = 5, in_key: str = "embedding", window_length: int | None = None):
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
             raise ValueError(f"k={k!r}; expected an integer >= 1 (the offset of s_(t-k)).")
-        if window_length is not None and (isinstance(window_length, bool)
-                                          or not isinstance(window_length, int)
-                                          or window_length < 2):
-            raise ValueError(f"window_length={window_length!r}; expected None or an integer "
-                             ">= 2 (the K embeddings s_(t-K+1) .. s_t).")
+        check_window_length(window_length, optional=True)
         out_keys = [INITIAL_EMBEDDING_KEY, PREVIOUS_EMBEDDING_KEY]
         super().__init__(in_keys=[in_key],
                          out_keys=out_keys + ([WINDOW_KEY] if window_length else []))
