@@ -44,10 +44,10 @@ RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 sys.path.insert(0, str(RECIPES))
 
 import sac_temporal  # noqa: E402
-import utils  # noqa: E402
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows  # noqa: E402
 from temporal_torchrl.envs import make_env  # noqa: E402
+from temporal_torchrl.training import factories  # noqa: E402
 
 SECTIONS = ("step", "loop", "reference", "replay")
 
@@ -80,18 +80,18 @@ def training_step(compiled: bool, tmp: Path, mode: str | None = None):
                         f"compile.enabled={str(compiled).lower()}",
                         f"compile.mode={mode or 'null'}")
     torch.manual_seed(0)
-    encoder = utils.make_encoder(cfg)
-    reward = utils.make_reward(cfg, encoder)
-    env = utils.make_environment(cfg, None, None)
-    actor, qvalue = utils.make_sac_agent(cfg, env)
+    encoder = factories.make_encoder(cfg)
+    reward = factories.make_reward(cfg, encoder)
+    env = factories.make_environment(cfg, None, None)
+    actor, qvalue = factories.make_sac_agent(cfg, env)
     env.close()
-    loss, target_updater, optimizer = utils.make_sac_loss(cfg, actor, qvalue, 4)
-    update_sac = utils.make_sac_update(cfg, loss, target_updater, optimizer)
-    buffer = utils.make_replay_buffer(cfg, 20 * 501, reward)
+    loss, target_updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
+    update_sac = factories.make_sac_update(cfg, loss, target_updater, optimizer)
+    buffer = factories.make_replay_buffer(cfg, 20 * 501, reward)
     buffer.extend(episode_rows(synthetic_episode(500, 1024, success_from=300)))
     for _ in range(9):
         buffer.extend(episode_rows(synthetic_episode(500, 1024)))
-    trainer = utils.make_reward_trainer(cfg, reward, torch.randn(1024), buffer)
+    trainer = factories.make_reward_trainer(cfg, reward, torch.randn(1024), buffer)
     assert trainer.stage == 2
 
     def step() -> None:
@@ -214,8 +214,8 @@ def loop_rows(tmp: Path, quick: bool, skip_liv: bool, mode: str | None) -> list[
 def plain_sac_steps_per_second(cfg, episodes: int) -> float:
     """The reference: TorchRL env.step + per-step buffer extend + SACLoss update, no VLM."""
     env = make_env(cfg.env.task, cfg.env.seed, max_episode_steps=cfg.env.max_episode_steps)
-    actor, qvalue = utils.make_sac_agent(cfg, env)
-    loss, updater, optimizer = utils.make_sac_loss(cfg, actor, qvalue, 4)
+    actor, qvalue = factories.make_sac_agent(cfg, env)
+    loss, updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
     buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(episodes * 1000),
                                     batch_size=cfg.sac.batch_size)
     steps = 0

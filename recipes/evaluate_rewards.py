@@ -35,7 +35,6 @@ from typing import Any
 
 import hydra
 import torch
-import utils
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from tensordict import TensorDict
@@ -57,6 +56,7 @@ from temporal_torchrl.evaluation import (
     variant_reward,
 )
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
+from temporal_torchrl.training import factories
 from temporal_torchrl.training.config import import_reward_modules, resolve_device
 
 _GROUPS = ("env", "encoder", "reward", "dataset", "finetune")
@@ -328,7 +328,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
         "encoder": {"name": encoder.name, "dim": encoder.dim,
                     "checkpoint": cfg.encoder.checkpoint,
                     "options": OmegaConf.to_container(cfg.encoder.options, resolve=True) or {},
-                    "description": utils.describe_encoder(cfg, encoder)},
+                    "description": factories.describe_encoder(cfg, encoder)},
         "dataset": {"spec": dataclasses.asdict(dataset_spec(cfg)),
                     "held_out_fraction": cfg.dataset.held_out_fraction,
                     "train": train.describe(), "held_out": held_out.describe(),
@@ -362,8 +362,8 @@ def evaluate(cfg: DictConfig, command: str | None = None) -> list[dict]:
     if cfg.threads is not None:
         torch.set_num_threads(cfg.threads)
     command = command or "python recipes/evaluate_rewards.py (config composed in code)"
-    encoder = utils.make_encoder(cfg)
-    print(utils.describe_encoder(cfg, encoder), flush=True)
+    encoder = factories.make_encoder(cfg)
+    print(factories.describe_encoder(cfg, encoder), flush=True)
     results = []
     for task in config_tasks(cfg):
         results.append(evaluate_task(task_config(cfg, task), encoder, command))

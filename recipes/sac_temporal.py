@@ -29,7 +29,6 @@ from collections.abc import Collection
 
 import hydra
 import torch
-import utils
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
@@ -41,6 +40,7 @@ from temporal_torchrl.metrics import DEFAULT_HORIZON, episode_success, ras, tt50
 from temporal_torchrl.training import (
     MetricWindow,
     RunDirectory,
+    factories,
     log_metrics,
     reward_statistics,
     rng_state,
@@ -81,35 +81,35 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     torch.manual_seed(cfg.env.seed)
 
     # ---- encoder, reward, env
-    encoder = utils.make_encoder(cfg) if uses_vlm_reward(cfg) else None
-    reward = utils.make_reward(cfg, encoder) if encoder is not None else None
-    env = utils.make_environment(cfg, encoder, reward)
+    encoder = factories.make_encoder(cfg) if uses_vlm_reward(cfg) else None
+    reward = factories.make_reward(cfg, encoder) if encoder is not None else None
+    env = factories.make_environment(cfg, encoder, reward)
     print(f"run directory: {run.path}")
-    print(utils.describe_encoder(cfg, encoder))
+    print(factories.describe_encoder(cfg, encoder))
 
     # ---- expert episodes: stage 2's preloaded positives and the goal image s_g
     finetune = reward is not None and (reward.positional_heads is not None
                                        or reward.directional_heads is not None)
     experts = []
     if state is None and (cfg.train.preload_positives > 0 or finetune):
-        experts = utils.make_expert_episodes(cfg, encoder, max(cfg.train.preload_positives, 1))
+        experts = factories.make_expert_episodes(cfg, encoder, max(cfg.train.preload_positives, 1))
     preloaded = experts[:cfg.train.preload_positives]
 
     # ---- SAC, replay buffer, reward-head trainer
-    actor, qvalue = utils.make_sac_agent(cfg, env)
-    sac_loss, target_updater, sac_optimizer = utils.make_sac_loss(
+    actor, qvalue = factories.make_sac_agent(cfg, env)
+    sac_loss, target_updater, sac_optimizer = factories.make_sac_loss(
         cfg, actor, qvalue, env.action_spec.shape[-1])
-    update_sac = utils.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
+    update_sac = factories.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
     expert_rows = (state["expert_rows"] if state is not None
                    else sum(len(episode) + 1 for episode in preloaded))
     capacity = replay_capacity(cfg, expert_rows,
                                saved=state["buffer_capacity"] if state is not None else None)
-    buffer = utils.make_replay_buffer(cfg, capacity, reward)
+    buffer = factories.make_replay_buffer(cfg, capacity, reward)
     embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
     trainer = None
     if finetune:
         goal_image = state["goal_image"] if state is not None else goal_image_embedding(experts[0])
-        trainer = utils.make_reward_trainer(cfg, reward, goal_image, buffer)
+        trainer = factories.make_reward_trainer(cfg, reward, goal_image, buffer)
 
     # ---- fresh start or resume
     if state is None:
@@ -133,10 +133,11 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         for rows in run.replay_episodes(inserted):
             buffer.extend(rows)
         run.truncate_episodes(episode)
-    collector = utils.make_collector(cfg, env, actor, max(0, cfg.train.random_steps - env_steps))
+    collector = factories.make_collector(cfg, env, actor,
+                                         max(0, cfg.train.random_steps - env_steps))
     if state is not None:  # after every random draw the build makes
         set_rng_state(state["rng"])
-    logger = utils.make_logger(cfg, run.path)
+    logger = factories.make_logger(cfg, run.path)
     metrics = MetricWindow()
 
     # ---- training loop: one vector step of env.num_envs envs, then its updates

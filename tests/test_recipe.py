@@ -8,10 +8,9 @@ from pathlib import Path
 import pytest
 import sac_temporal
 import torch
-import utils
 from hydra import compose, initialize_config_dir
 
-from temporal_torchrl.training import RunDirectory
+from temporal_torchrl.training import RunDirectory, factories
 from temporal_torchrl.training.config import default_run_dir, override_keys, resumed_config
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
@@ -88,7 +87,7 @@ def test_stage_two_preloads_positive_experts(tmp_path):
 @pytest.mark.parametrize(("steps_after_success", "length"), [("5", None), ("null", 500)])
 def test_preloaded_experts_are_cut_or_whole(tmp_path, steps_after_success, length):
     cfg = config(tmp_path, f"train.expert_steps_after_success={steps_after_success}")
-    episode, = utils.make_expert_episodes(cfg, None, 1)
+    episode, = factories.make_expert_episodes(cfg, None, 1)
     first = int(episode["next", "success"].squeeze(-1).float().argmax())
     assert len(episode) == (first + 6 if length is None else length)
 
@@ -232,7 +231,7 @@ def test_resume_continues_with_the_saved_config(tmp_path, capsys):
     assert summary["config"]["env"]["task"] == "door-open"
     assert summary["config"]["reward"]["rho"] == 0.05
     assert summary["ras"]["budget"] == 400  # door-open's, not drawer-open's 300
-    assert summary["config"]["train"]["expert_steps_after_success"] == 5
+    assert summary["config"]["train"]["expert_steps_after_success"] is None
     assert "not using the current values of env.task" in capsys.readouterr().out
 
 
@@ -278,7 +277,7 @@ def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
                    f"replay_buffer.capacity={expert_rows + 2 * 21}")
     sac_temporal.train(small)
     state = RunDirectory(run_dir).load_checkpoint()
-    buffer = utils.make_replay_buffer(small, state["buffer_capacity"], reward=None)
+    buffer = factories.make_replay_buffer(small, state["buffer_capacity"], reward=None)
     for rows in RunDirectory(run_dir).replay_episodes(state["inserted"]):
         buffer.extend(rows)
     stored = set(buffer.sample(1000)["episode"].tolist())

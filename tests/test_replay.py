@@ -154,9 +154,9 @@ def test_labels_follow_furl_rule_and_groups_follow_the_stage():
     assert set(batch.keys()) == {"negative", "positive", "positive_pair"}
     positives = batch["positive"]
     assert (positives["label"] == POSITIVE).all() and (positives["episode"] == 1).all()
-    # states s_1 .. s_17: transitions 0..16 are positive (first success 14, then 15 and 16);
-    # the reset frame s_0 is never labelled
-    assert set(positives["step"].tolist()) == set(range(1, 18))
+    # states s_1 .. s_17 are labelled positive (transitions 0..16: first success 14, then 15
+    # and 16; the reset frame s_0 never is); FuRL draws only the valid ones, s_11 .. s_17
+    assert set(positives["step"].tolist()) == set(range(11, 18))
     assert buffer.num_positive_states == 17
     negatives = batch["negative"]
     assert (negatives["episode"] == 0).all()
@@ -175,6 +175,35 @@ def test_labels_follow_furl_rule_and_groups_follow_the_stage():
     no_pairs = EpisodeReplayBuffer(capacity=200, history=2, gap=17)
     insert(no_pairs, 1, 30, successes=(14, 15, 16, 20))
     assert set(no_pairs.finetuning.sample(4).keys()) == {"positive"}
+    # with no valid positive yet, the positives fall back to every positive state
+    assert set(no_pairs.finetuning.sample(400)["positive", "step"].tolist()) == set(range(1, 18))
+
+
+def test_pos_neg_positives_never_below_gap_over_many_draws():
+    """FuRL's rule written out: a positive drawn for the pos-neg term has a lagged partner in
+    its positive run, i.e. its step is above gap, on a 28-step positive episode."""
+    gap = 10
+    buffer = EpisodeReplayBuffer(capacity=400, history=5, gap=gap)
+    insert(buffer, 0, 40)
+    insert(buffer, 1, 28, successes=(27,))  # states s_1 .. s_28 positive
+    steps = torch.cat([buffer.finetuning.sample(256)["positive", "step"] for _ in range(40)])
+    assert int(steps.min()) == gap + 1 and int(steps.max()) == 28
+    # and each valid state is drawn: s_11 .. s_28, 18 states, uniformly
+    counts = torch.bincount(steps, minlength=29)[gap + 1:]
+    assert counts.numel() == 18 and int(counts.min()) > 0.6 * steps.numel() / 18
+
+
+def test_stage1_negatives_reach_the_oldest_episodes():
+    """Before any positive, FuRL's neg-neg batch comes from the whole buffer: label_window
+    (FuRL's stage-2 FIFO) does not apply; after a positive episode it does."""
+    buffer = EpisodeReplayBuffer(capacity=1000, history=2, label_window=20)
+    for episode in range(10):
+        insert(buffer, episode, 9)  # 90 negative states, 4.5 windows
+    drawn = torch.cat([buffer.finetuning.sample(512)["negative", "episode"] for _ in range(8)])
+    assert set(drawn.tolist()) == set(range(10))
+    insert(buffer, 10, 12, successes=(11,))
+    drawn = buffer.finetuning.sample(2000)["negative", "episode"]
+    assert set(drawn.tolist()) == {7, 8, 9}  # the 20 most recent negatives: 2 + 9 + 9
 
 
 def test_permanent_episodes_survive_wrap_around():
@@ -199,6 +228,7 @@ def test_label_window_keeps_most_recent():
     buffer = EpisodeReplayBuffer(capacity=500, history=2, label_window=12)
     for episode in range(4):
         insert(buffer, episode, 9)
+    insert(buffer, 4, 3, successes=(1,))  # a positive: stage 2, where FuRL has the window
     negatives = buffer.finetuning.sample(300)["negative"]
     assert set(negatives["episode"].tolist()) == {2, 3}
     assert set(zip(negatives["episode"].tolist(), negatives["step"].tolist(), strict=True)) == {

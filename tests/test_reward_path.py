@@ -4,13 +4,13 @@ see the same rewards for the same stored embeddings, checked value by value."""
 import sac_temporal
 import torch
 import torch.nn.functional as F
-import utils
 from tensordict import TensorDict
 from test_recipe import config
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows, transition_index
 from temporal_torchrl.objectives import PositionalRankingLoss
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, register_reward, unregister_reward
+from temporal_torchrl.training import factories
 
 
 def furl_plus_d3(reward, next_states: TensorDict) -> torch.Tensor:
@@ -37,12 +37,12 @@ def test_rendered_rollout_relabelled_from_the_buffer_gives_the_env_rewards(tmp_p
                  "env.image_size=32", "env.max_episode_steps=12", "reward.k=3",
                  "replay_buffer.embedding_dtype=float32")
     torch.manual_seed(0)
-    encoder = utils.make_encoder(cfg)
-    reward = utils.make_reward(cfg, encoder)
-    env = utils.make_environment(cfg, encoder, reward)
+    encoder = factories.make_encoder(cfg)
+    reward = factories.make_reward(cfg, encoder)
+    env = factories.make_environment(cfg, encoder, reward)
     rollout = env.rollout(12, break_when_any_done=False)
     env.close()
-    buffer = utils.make_replay_buffer(cfg, capacity=100, reward=reward)
+    buffer = factories.make_replay_buffer(cfg, capacity=100, reward=reward)
     buffer.extend(episode_rows(rollout, embedding_dtype=torch.float32))
     rows = torch.arange(12)  # the episode's transitions, in order (steps = rows)
     batch = buffer[transition_index(rows, rows, cfg.reward.k)]  # relabelled by its transform
@@ -63,8 +63,8 @@ def test_sac_loss_receives_the_relabelled_rewards(tmp_path, monkeypatch):
     from torchrl.objectives import SACLoss
 
     made = []
-    make_reward = utils.make_reward
-    monkeypatch.setattr(utils, "make_reward",
+    make_reward = factories.make_reward
+    monkeypatch.setattr(factories, "make_reward",
                         lambda *args: made.append(make_reward(*args)) or made[-1])
     checked = []
     forward = SACLoss.forward
@@ -170,7 +170,7 @@ def test_ranking_loss_learns_to_order_expert_states_by_time(tmp_path):
 
     cfg = config(tmp_path, "train.expert_steps_after_success=0", "env.max_episode_steps=500")
     torch.manual_seed(0)
-    experts = utils.make_expert_episodes(cfg, None, 4)
+    experts = factories.make_expert_episodes(cfg, None, 4)
     encoder = load_encoder("state", dim=32)
     buffer = EpisodeReplayBuffer(capacity=5000, history=5, gap=10)
     embed = encoder.embed

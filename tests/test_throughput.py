@@ -5,12 +5,11 @@ match eager ones."""
 import pytest
 import sac_temporal
 import torch
-import utils
 from test_recipe import config, episode_rows
 
 from temporal_torchrl.encoders import load_encoder
 from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
-from temporal_torchrl.training import RunDirectory
+from temporal_torchrl.training import RunDirectory, factories
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -89,15 +88,15 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path, monkeypatch):
 
     monkeypatch.setattr(inductor_config, "fallback_random", True)
     cfg = config(tmp_path, "reward.directional=d3")
-    env = utils.make_environment(cfg, None, None)
+    env = factories.make_environment(cfg, None, None)
     results = []
     batches = [env.rollout(16, break_when_any_done=False) for _ in range(3)]
     for compiled in (False, True):
         cfg.compile.enabled = compiled
         torch.manual_seed(0)
-        actor, qvalue = utils.make_sac_agent(cfg, env)
-        loss, updater, optimizer = utils.make_sac_loss(cfg, actor, qvalue, 4)
-        update = utils.make_sac_update(cfg, loss, updater, optimizer)
+        actor, qvalue = factories.make_sac_agent(cfg, env)
+        loss, updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
+        update = factories.make_sac_update(cfg, loss, updater, optimizer)
         losses = [update(batch.clone())["loss_qvalue"] for batch in batches]
         results.append(([p.detach().clone() for p in loss.parameters()], losses))
     env.close()

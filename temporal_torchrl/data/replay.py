@@ -419,19 +419,27 @@ class TransitionSampler(_EpisodeRowSampler):
 class FinetuningSampler(_EpisodeRowSampler):
     """The reward-finetuning batch's states, from the same storage as SAC's transitions.
 
-    Groups (:meth:`groups`, stacked in this order, ``batch_size`` states each): ``negative``
-    (when any negative state is stored); once a positive episode is stored (stage 2)
-    ``positive`` and, when some positive run is longer than ``gap``, ``positive_pair``: states
-    ``s_i`` and ``s_{i-gap}`` of one positive episode (both positive: positives run from step 1,
-    so ``i - gap >= 1`` keeps both in the same positive run). Each state comes with the rows of
-    its history (:func:`state_index`); :class:`FinetuningLayout` names the groups.
+    Groups (:meth:`groups`, stacked in this order, ``batch_size`` states each), as FuRL and the
+    thesis release sample them:
+
+    - ``negative``: negative states (when any is stored); before the first positive (stage 1)
+      from every stored negative, afterwards from the ``label_window`` most recent ones.
+    - ``positive`` (once a positive episode is stored): FuRL's *valid* positives, the positive
+      states ``s_i`` with ``i > gap`` (both stored and labelled ``s_1 ..``, so ``s_{i-gap}`` is
+      positive too); only while no positive run is longer than ``gap`` does it fall back to
+      every positive state.
+    - ``positive_pair``: ``s_i`` drawn from the same valid positives, with ``s_{i-gap}`` of its
+      episode.
+
+    Each state comes with the rows of its history (:func:`state_index`);
+    :class:`FinetuningLayout` names the groups.
 
     Args:
         writer, history, window_length: as :class:`TransitionSampler`.
         gap: the positive pairs' lag (``reward.gap``).
-        label_window: positives and negatives are drawn from the most recent ``label_window``
-            labelled states of each kind (FuRL's two FIFO buffers of 20,000 embeddings); None:
-            all of them.
+        label_window: once positives exist, positives and negatives are drawn from the most
+            recent ``label_window`` labelled states of each kind (FuRL's two FIFO buffers of
+            20,000 embeddings); None: all of them.
     """
 
     def __init__(self, writer: EpisodeWriter, history: int, window_length: int | None, *,
@@ -460,10 +468,16 @@ class FinetuningSampler(_EpisodeRowSampler):
             for name, label in (("positive", POSITIVE), ("negative", NEGATIVE)):
                 rows = torch.nonzero(valid & (columns["label"] == label)).reshape(-1)
                 rows = rows[torch.argsort(columns["episode"][rows], stable=True)]
-                if self.label_window is not None:
-                    rows = rows[-self.label_window:]
                 candidates[name] = rows.int()
                 candidates[name + "_steps"] = columns["step"][rows].int()
+            # FuRL's FIFO windows exist only once there are positives: its stage-1 negatives
+            # come from the whole replay buffer.
+            if self.label_window is not None and candidates["positive"].numel() > 0:
+                for name in ("positive", "negative"):
+                    candidates[name] = candidates[name][-self.label_window:]
+                    candidates[name + "_steps"] = candidates[name + "_steps"][-self.label_window:]
+            # FuRL's "valid" positives: states with a partner gap steps earlier in the same
+            # positive run; both the pos-neg and the pos-pos terms draw from them.
             later = candidates["positive_steps"] > self.gap
             candidates["pair"] = candidates["positive"][later]
             candidates["pair_steps"] = candidates["positive_steps"][later]
@@ -484,7 +498,8 @@ class FinetuningSampler(_EpisodeRowSampler):
             raise RuntimeError("no labelled states stored yet: insert episodes before sampling.")
         anchors, steps = [], []
         for name in groups:
-            source = "pair" if name == "positive_pair" else name
+            source = ("pair" if name == "positive_pair" or (name == "positive" and candidates[
+                "pair"].numel() > 0) else name)
             pick = _draw(candidates[source], batch_size, f"{name} states")
             anchors.append(candidates[source][pick])
             steps.append(candidates[source + "_steps"][pick])

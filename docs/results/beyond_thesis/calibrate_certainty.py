@@ -31,12 +31,12 @@ RECIPES = Path(__file__).resolve().parents[3] / "recipes"
 sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
-import utils  # noqa: E402
 
 from temporal_torchrl.evaluation import (  # noqa: E402
     make_finetuning_buffer,
 )
 from temporal_torchrl.rewards import direction_certainty, reference_scales  # noqa: E402
+from temporal_torchrl.training import factories  # noqa: E402
 
 BANDWIDTHS = (0.05, 0.1, 0.2, 0.3)
 PRIORS = (0.5, 1.0, 2.0)
@@ -85,7 +85,7 @@ def main(overrides: list[str]) -> None:
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
         cfg = compose("evaluate_rewards", overrides=overrides)
     evaluate_rewards.validate_config(cfg)
-    encoder = utils.make_encoder(cfg)
+    encoder = factories.make_encoder(cfg)
     start = time.perf_counter()
     tasks = evaluate_rewards.config_tasks(cfg)
     per_task = {task: task_targets(evaluate_rewards.task_config(cfg, task), encoder)

@@ -33,7 +33,6 @@ RECIPES = Path(__file__).resolve().parents[3] / "recipes"
 sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
-import utils  # noqa: E402
 
 from temporal_torchrl.evaluation import (  # noqa: E402
     auroc,
@@ -46,6 +45,7 @@ from temporal_torchrl.evaluation import (  # noqa: E402
     variant_reward,
 )
 from temporal_torchrl.rewards import TemporalReward  # noqa: E402
+from temporal_torchrl.training import factories  # noqa: E402
 
 #: (label, variant, certainty scaling)
 CONFIGURATIONS = (("d3", "d3", False), ("d_certainty", "d_certainty", False),
@@ -112,7 +112,7 @@ def main(overrides: list[str]) -> None:
         cfg = compose("evaluate_rewards", overrides=overrides)
     evaluate_rewards.validate_config(cfg)
     start = time.perf_counter()
-    encoder = utils.make_encoder(cfg)
+    encoder = factories.make_encoder(cfg)
     tasks = evaluate_rewards.config_tasks(cfg)
     per_task = {task: task_shapes(evaluate_rewards.task_config(cfg, task), encoder)
                 for task in tasks}

@@ -31,7 +31,6 @@ RECIPES = Path(__file__).resolve().parents[3] / "recipes"
 sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
-import utils  # noqa: E402
 
 from temporal_torchrl.evaluation import (  # noqa: E402
     finetune_reward,
@@ -41,6 +40,7 @@ from temporal_torchrl.evaluation import (  # noqa: E402
 )
 from temporal_torchrl.objectives import finetuning_losses  # noqa: E402
 from temporal_torchrl.rewards import TemporalReward  # noqa: E402
+from temporal_torchrl.training import factories  # noqa: E402
 
 ENCODERS = ("transformer", "convolution")
 
@@ -144,7 +144,7 @@ def main(overrides: list[str]) -> None:
         lines.append(f"| {name} | {parameters[0]:,} | {parameters[1]:,} | "
                      f"{milliseconds[0]:.1f} | {milliseconds[1]:.1f} |")
         print(lines[-1], flush=True)
-    encoder = utils.make_encoder(cfg)
+    encoder = factories.make_encoder(cfg)
     tasks = evaluate_rewards.config_tasks(cfg)
     per_task = {task: task_scores(evaluate_rewards.task_config(cfg, task), encoder)
                 for task in tasks}

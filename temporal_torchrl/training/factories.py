@@ -1,4 +1,9 @@
-"""``make_*`` factories of ``sac_temporal.py`` (as in TorchRL's sota recipes), from its config."""
+"""The ``make_*`` factories of ``recipes/sac_temporal.py`` (as in TorchRL's sota recipes), from
+its config.
+
+They live in the package, not beside the script, so a job that unpickles the recipe elsewhere
+(a submitit job on a Slurm node) imports them as any other module.
+"""
 
 from __future__ import annotations
 
@@ -27,8 +32,8 @@ from temporal_torchrl.envs import (
     make_temporal_reward,
 )
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.training import RewardHeadTrainer
 from temporal_torchrl.training.config import none_or_name, resolve_device
+from temporal_torchrl.training.trainer import RewardHeadTrainer
 
 
 def make_encoder(cfg: DictConfig) -> Encoder:
