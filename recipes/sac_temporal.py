@@ -34,7 +34,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from temporal_torchrl.data import episode_rows, goal_image_embedding, preload_experts
+from temporal_torchrl.data import episode_rows
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.metrics import DEFAULT_HORIZON, episode_success, ras, tt50s, ttfs
 from temporal_torchrl.training import (
@@ -55,6 +55,7 @@ from temporal_torchrl.training.config import (
     uses_vlm_reward,
     validate_config,
 )
+from temporal_torchrl.training.relay import RelayExploration
 
 # What an episode keeps from each step (pixels never reach the buffer).
 STEP_KEYS = ("observation", "embedding", "action", "success", ("next", "observation"),
@@ -87,13 +88,11 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     print(f"run directory: {run.path}")
     print(factories.describe_encoder(cfg, encoder))
 
-    # ---- expert episodes: stage 2's preloaded positives and the goal image s_g
+    # ---- stage 2's preloaded positives and the goal image s_g
     finetune = reward is not None and (reward.positional_heads is not None
                                        or reward.directional_heads is not None)
-    experts = []
-    if state is None and (cfg.train.preload_positives > 0 or finetune):
-        experts = factories.make_expert_episodes(cfg, encoder, max(cfg.train.preload_positives, 1))
-    preloaded = experts[:cfg.train.preload_positives]
+    preloaded, goal_image = (factories.make_preloaded_positives(cfg, encoder, finetune)
+                             if state is None else ([], state["goal_image"]))
 
     # ---- SAC, replay buffer, reward-head trainer
     actor, qvalue = factories.make_sac_agent(cfg, env)
@@ -101,21 +100,20 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         cfg, actor, qvalue, env.action_spec.shape[-1])
     update_sac = factories.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
     expert_rows = (state["expert_rows"] if state is not None
-                   else sum(len(episode) + 1 for episode in preloaded))
+                   else sum(len(rows) for rows in preloaded))
     capacity = replay_capacity(cfg, expert_rows,
                                saved=state["buffer_capacity"] if state is not None else None)
     buffer = factories.make_replay_buffer(cfg, capacity, reward)
     embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
     trainer = None
     if finetune:
-        goal_image = state["goal_image"] if state is not None else goal_image_embedding(experts[0])
         trainer = factories.make_reward_trainer(cfg, reward, goal_image, buffer)
 
     # ---- fresh start or resume
     if state is None:
         run.create(config=OmegaConf.to_container(cfg, resolve=True))
-        for index, rows in enumerate(preload_experts(buffer, preloaded,
-                                                     embedding_dtype=embedding_dtype)):
+        for index, rows in enumerate(preloaded):
+            buffer.extend(rows)
             run.save_replay_episode(index, rows)
         episode, env_steps, inserted, updates = 0, 0, len(preloaded), 0
         successes, last_metrics, credits = [], {}, {"sac": 0.0, "reward": 0.0}
@@ -133,8 +131,15 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         for rows in run.replay_episodes(inserted):
             buffer.extend(rows)
         run.truncate_episodes(episode)
-    collector = factories.make_collector(cfg, env, actor,
+        run.truncate_positives(episode)
+    relay = (factories.make_relay(cfg, env, actor, buffer.num_positive_states)
+             if cfg.train.relay and trainer is not None else None)
+    if relay is not None and state is not None:
+        relay.load_state_dict(state["relay"])
+    print(f"relay exploration: {describe_relay(cfg, relay)}")
+    collector = factories.make_collector(cfg, env, relay.policy if relay else actor,
                                          max(0, cfg.train.random_steps - env_steps))
+    random_until = env_steps + collector.init_random_frames
     if state is not None:  # after every random draw the build makes
         set_rng_state(state["rng"])
     logger = factories.make_logger(cfg, run.path)
@@ -161,7 +166,11 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                 credits["reward"] -= 1
             while credits["sac"] >= 1:
                 batch = buffer.sample()  # rewards relabelled with the current heads
+                relay_batch = (relay.task_reward_batch(batch)
+                               if relay is not None and relay.schedule.active else None)
                 metrics.add("sac", update_sac(batch))
+                if relay_batch is not None:  # the relay agent learns from the same batches
+                    metrics.add("relay", relay.update(relay_batch))
                 metrics.add("relabelled", reward_statistics(batch["next"]))
                 credits["sac"] -= 1
                 updates += 1
@@ -171,6 +180,8 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                                          "train/positive_states": buffer.num_positive_states})
                     log_metrics(logger, last_metrics, env_steps)
         ended = data["next", "done"].reshape(num_envs).nonzero().reshape(-1).tolist()
+        if relay is not None:
+            relay.schedule.advance(ended, acted=env_steps > random_until)
         if not ended:
             continue
 
@@ -185,6 +196,8 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
             episode += 1
             success = episode_success(trajectory["next", "success"])
             successes.append(success)
+            if success and cfg.train.save_positives:
+                run.save_positive_episode(episode, rows)
             task_rewards = trajectory.get(("next", "task_reward"),
                                           trajectory["next", "success"].float() - 1.0)
             vlm_rewards = trajectory.get(("next", "vlm_reward"), torch.zeros_like(task_rewards))
@@ -192,10 +205,16 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                    "return": float(task_rewards.sum()),
                    "mean_vlm_reward": float(vlm_rewards.mean()), "stage": stages[index]}
             run.append_episode(row)
-            log_metrics(logger, {f"train/{key}": float(row[key]) for key in
-                                 ("success", "return", "mean_vlm_reward", "stage")}, env_steps)
+            episode_metrics = {f"train/{key}": float(row[key]) for key in
+                               ("success", "return", "mean_vlm_reward", "stage")}
+            if relay is not None:
+                episode_metrics["train/relay_fraction"] = (
+                    relay.schedule.episode_relay_steps(index) / len(trajectory))
+            log_metrics(logger, episode_metrics, env_steps)
             stages[index] = 2 if buffer.has_positives else 1
             bar.update(1)
+        if relay is not None:
+            relay.schedule.end_if_enough(buffer.num_positive_states)
         elapsed = time.perf_counter() - start_time
         bar.set_postfix(success_rate=f"{sum(successes) / len(successes):.2f}",
                         steps_per_s=f"{(env_steps - start_steps) / max(elapsed, 1e-9):.0f}")
@@ -209,7 +228,8 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
                 "episode": episode, "env_steps": env_steps, "inserted": inserted,
                 "updates": updates, "credits": credits, "last_metrics": last_metrics,
                 "successes": successes, "rng": rng_state(), "buffer_capacity": buffer.capacity,
-                "preloaded": buffer.num_permanent_episodes, "expert_rows": expert_rows})
+                "preloaded": buffer.num_permanent_episodes, "expert_rows": expert_rows,
+                "relay": relay.state_dict() if relay is not None else {}})
         stopped = (cfg.train.stop_after_episodes is not None
                    and episode >= cfg.train.stop_after_episodes)
         if episode >= cfg.train.episodes or stopped:
@@ -231,12 +251,23 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         "steps_per_second": (env_steps - start_steps) / max(elapsed, 1e-9),
         "encoder": cfg.encoder.name if encoder is not None else None,
         "updates": updates, "last_metrics": last_metrics,
+        "relay_steps": relay.schedule.total_relay_steps if relay is not None else 0,
         "config": OmegaConf.to_container(cfg, resolve=True),
     }
     run.write_summary(summary)
     log_metrics(logger, {f"summary/{key}": float(summary[key]) for key in ("ttfs", "tt50s")},
                 env_steps)
     return summary
+
+
+def describe_relay(cfg: DictConfig, relay: RelayExploration | None) -> str:
+    if relay is None:
+        return ("off (train.relay=false)" if not cfg.train.relay
+                else "off (no finetuned reward heads to relay for)")
+    if not relay.schedule.active:
+        return f"off (the positives already reach train.relay_threshold={relay.schedule.threshold})"
+    return (f"on until {relay.schedule.threshold:,} positive states (periods "
+            f"{list(cfg.train.relay_periods)}, noise {cfg.train.relay_noise})")
 
 
 @hydra.main(version_base=None, config_path=".", config_name="config")

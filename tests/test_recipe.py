@@ -100,6 +100,74 @@ def test_sac_baseline_preloads_experts_without_an_encoder(tmp_path):
     assert RunDirectory(tmp_path / "run").load_checkpoint()["inserted"] == 2
 
 
+def test_save_positives_writes_each_successful_episode_whole(tmp_path, monkeypatch):
+    """Episodes 1 and 3 count as successes here (a random policy does not succeed in 20 steps):
+    their stored rows, whole, are what positives/ receives."""
+    outcomes = iter([True, False, True])
+    monkeypatch.setattr(sac_temporal, "episode_success", lambda success: next(outcomes))
+    sac_temporal.train(config(tmp_path, "train.save_positives=true"))
+    run = RunDirectory(tmp_path / "run")
+    assert sorted(path.name for path in (run.path / "positives").iterdir()) == [
+        "000001.pt", "000003.pt"]
+    saved = list(run.positive_episodes(2))
+    replayed = list(run.replay_episodes(3))
+    assert all(len(rows) == 21 for rows in saved)
+    assert (saved[0] == replayed[0]).all() and (saved[1] == replayed[2]).all()
+    run.truncate_positives(2)  # a resume from episode 2's checkpoint re-runs episode 3
+    assert run.saved_positive_count() == 1
+
+
+def positives_source(tmp_path) -> Path:
+    """A run directory holding 2 saved positives: the whole scripted-expert episodes a stage-2
+    run preloaded, saved as a stage-1 run with train.save_positives=true saves its own."""
+    sac_temporal.train(config(tmp_path / "experts", "protocol=stage2",
+                              "train.preload_positives=2", "train.episodes=1"))
+    experts = RunDirectory(tmp_path / "experts" / "run")
+    source = RunDirectory(tmp_path / "source")
+    source.create(config=experts.config())
+    for episode, rows in enumerate(experts.replay_episodes(2), start=1):
+        source.save_positive_episode(episode, rows)
+    return source.path
+
+
+def test_positives_from_another_run_are_preloaded(tmp_path):
+    source = positives_source(tmp_path)
+    cfg = config(tmp_path, "protocol=stage2", "train.preload_positives=2", "train.episodes=1",
+                 f"train.positives_from={source}")
+    sac_temporal.train(cfg)
+    run = RunDirectory(tmp_path / "run")
+    preloaded = list(run.replay_episodes(2))
+    for given, stored in zip(RunDirectory(source).positive_episodes(2), preloaded, strict=True):
+        assert len(stored) == 501 and (given == stored).all()
+    # s_g from the stored rows is the state goal_image_embedding takes from the expert episode
+    # (rounded to the rows' float16)
+    expected = RunDirectory(tmp_path / "experts" / "run").load_checkpoint()["goal_image"]
+    torch.testing.assert_close(run.load_checkpoint()["goal_image"], expected.half().float())
+    # SAC without a VLM reward takes the observations only
+    sac = config(tmp_path / "sac", "preset=sac", "protocol=stage2", "train.preload_positives=1",
+                 "train.episodes=1", "env.max_episode_steps=20", f"train.positives_from={source}")
+    sac_temporal.train(sac)
+    assert "embedding" not in next(RunDirectory(tmp_path / "sac" / "run").replay_episodes(1))
+
+
+@pytest.mark.parametrize(("override", "message"), [
+    ("train.preload_positives=3", "holds 2 saved positive episodes, fewer than"),
+    ("env.seed=1", "env.seed=0, this run has env.seed=1"),
+    ("env.task=door-open", "env.task='drawer-open', this run has env.task='door-open'"),
+    ("encoder.options.dim=8", "encoder.options"),
+])
+def test_positives_from_a_mismatched_source_is_refused(tmp_path, override, message):
+    source = positives_source(tmp_path)
+    cfg = config(tmp_path, "protocol=stage2", "train.preload_positives=2", "train.episodes=1",
+                 f"train.positives_from={source}", *override.split())
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(".", r"\.")):
+        sac_temporal.train(cfg)
+    missing = config(tmp_path, "protocol=stage2", f"train.positives_from={tmp_path / 'none'}",
+                     "overwrite=true")
+    with pytest.raises(FileNotFoundError, match="no run directory there"):
+        sac_temporal.train(missing)
+
+
 USER_REWARD = """
 from temporal_torchrl.rewards import cosine_similarity, register_reward
 
@@ -417,6 +485,9 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     ("reward.k=0", "reward.k"), ("train.episodes=0", "train.episodes"),
     ("logger.backend=tensorboard", "logger.backend"),
     ("train.expert_steps_after_success=-1", "train.expert_steps_after_success"),
+    ("train.relay=maybe", "train.relay"), ("train.relay_periods=[0]", "train.relay_periods"),
+    ("train.relay_noise=-1", "train.relay_noise"),
+    ("train.save_positives=1", "train.save_positives"),
     ("encoder=state", "did you mean encoder.name=state"), ("reward=furl", "reward.<key>"),
     ("sac.batch_size=0", "sac.batch_size"),
     ("train.utd_ratio=-1", "train.utd_ratio"), ("env.num_envs=0", "env.num_envs"),

@@ -298,3 +298,20 @@ def test_episodes_must_carry_the_same_keys():
     assert "embedding" not in batch["next"].keys() and batch["next", "observation"].shape == (4, 39)
     with pytest.raises(ValueError, match="same encoder, or none of them"):
         insert(buffer, 1, 5)
+
+
+def test_whole_preloaded_positive_gives_sac_its_reward_zero_transitions():
+    """A preloaded episode kept whole puts every transition in SAC's buffer with its task reward:
+    counted here from the success pattern the episode was built with (success after steps
+    100..299, lost, back after 400..499), not from the buffer's labels."""
+    successes = list(range(100, 300)) + list(range(400, 500))
+    buffer = EpisodeReplayBuffer(capacity=600, history=5, permanent_episodes=1)
+    insert(buffer, 0, 500, successes=successes)
+    transitions = all_transitions(buffer)
+    assert buffer.num_transitions == transitions.shape[0] == 500
+    assert int((transitions["next", "reward"] == 0).sum()) == len(successes) == 300
+    # The finetuning's positives run from the start to where success is first lost: s_1..s_300
+    assert buffer.num_positive_states == 300
+    cut = EpisodeReplayBuffer(capacity=600, history=5, permanent_episodes=1)
+    insert(cut, 0, 106, successes=range(100, 106))  # the old preload: cut 5 steps after
+    assert int((all_transitions(cut)["next", "reward"] == 0).sum()) == 6

@@ -78,8 +78,9 @@ def test_sac_loss_receives_the_relabelled_rewards(tmp_path, monkeypatch):
         return forward(self, tensordict)
 
     monkeypatch.setattr(SACLoss, "forward", recording_forward)
+    # No relay: its agent's SACLoss learns from the sparse reward (tests/test_relay.py)
     sac_temporal.train(config(tmp_path, "reward.directional=d3", "reward.rho=1.0",
-                              "reward.lambda_=4.0", "train.episodes=2"))
+                              "reward.lambda_=4.0", "train.episodes=2", "train.relay=false"))
     assert len(checked) == 20  # one update per step once the first episode is stored
     for received, expected, task in checked:
         torch.testing.assert_close(received, expected)

@@ -1,6 +1,10 @@
 """Episode replay on TorchRL's buffer API (writer, samplers, layouts), labels and experts."""
 
-from temporal_torchrl.data.experts import embed_episode, goal_image_embedding, preload_experts
+from temporal_torchrl.data.experts import (
+    embed_episode,
+    goal_image_embedding,
+    goal_image_from_rows,
+)
 from temporal_torchrl.data.replay import (
     FINETUNING_GROUPS,
     NEGATIVE,
@@ -35,7 +39,7 @@ __all__ = [
     "episode_labels",
     "episode_rows",
     "goal_image_embedding",
-    "preload_experts",
+    "goal_image_from_rows",
     "state_index",
     "transition_index",
 ]

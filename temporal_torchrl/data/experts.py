@@ -1,4 +1,4 @@
-"""Expert episodes for the replay buffer: embedding, stage-2 preloading and the goal image s_g.
+"""Expert episodes for the replay buffer: embedding and the goal image s_g.
 
 The expert episodes come from :func:`temporal_torchrl.envs.collect_expert_episodes` with the
 training run's task, seed and render settings, so their frames are the training frames of the
@@ -11,7 +11,6 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDict, TensorDictBase
 
-from temporal_torchrl.data.replay import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs import first_success_index
 
@@ -51,23 +50,11 @@ def goal_image_embedding(episode: TensorDictBase, encoder: Encoder | None = None
         return encoder.embed(state)[0].float().cpu()
 
 
-def preload_experts(buffer: EpisodeReplayBuffer, episodes: list[TensorDictBase],
-                    encoder: Encoder | None = None,
-                    embedding_dtype: torch.dtype = torch.float16) -> list[TensorDict]:
-    """Insert expert episodes (stage 2's preloaded positives); returns their stored rows.
-
-    Episodes without embeddings are embedded with ``encoder``; with no encoder they are stored as
-    they are (observations only, as for SAC without a VLM reward). They are labelled by the same
-    rule as training episodes (:func:`~temporal_torchrl.data.episode_labels`): a successful expert
-    episode, cut a few steps after its first success, is positive up to its first success and
-    through the success steps right after it (steps after success flips back off, as it can in
-    door-open and push, stay unlabelled). Build the buffer with ``permanent_episodes`` equal to
-    their number: however long the run, the ring of training episodes never overwrites them.
-    """
-    rows = []
-    for episode in episodes:
-        if "embedding" not in episode.keys() and encoder is not None:
-            episode = embed_episode(episode, encoder)
-        rows.append(episode_rows(episode, embedding_dtype=embedding_dtype))
-        buffer.extend(rows[-1])
-    return rows
+def goal_image_from_rows(rows: TensorDictBase) -> torch.Tensor:
+    """s_g ``[D]`` from an episode's stored rows (:func:`~temporal_torchrl.data.episode_rows`):
+    the embedding of its first success state, the state :func:`goal_image_embedding` reads."""
+    success = rows["success"].reshape(rows.shape[0], -1).any(-1)
+    if not bool(success.any()) or "embedding" not in rows.keys():
+        raise ValueError("these rows hold no successful, embedded state: s_g needs a positive "
+                         "episode stored with its embeddings.")
+    return rows["embedding"][int(success.nonzero()[0, 0])].float().clone()

@@ -78,6 +78,8 @@ _NUMERIC_CHECKS = (
     ("train.random_steps", *_integer(0), False),
     ("train.utd_ratio", *_number(lambda v: v >= 0, "a number >= 0"), False),
     ("train.reward_updates_per_step", *_number(lambda v: v >= 0, "a number >= 0"), False),
+    ("train.relay_noise", *_number(lambda v: v >= 0, "a number >= 0"), False),
+    ("train.relay_threshold", *_integer(0), False),
     ("train.checkpoint_every", *_integer(1), False),
     ("train.stop_after_episodes", *_integer(1), True),
     ("train.threads", *_integer(1), True),
@@ -191,6 +193,17 @@ def validate_config(cfg: DictConfig) -> None:
         baseline_text(cfg.env.task, cfg.reward.baseline)
     except ValueError as error:
         raise ValueError(f"config reward.baseline: {error}") from error
+    for key in ("train.relay", "train.save_positives"):
+        if not isinstance(OmegaConf.select(cfg, key), bool):
+            raise bad(key, OmegaConf.select(cfg, key), "true or false")
+    periods = cfg.train.relay_periods
+    if not periods or not all(_integer(1)[0](period) for period in periods):
+        raise bad("train.relay_periods", periods,
+                  "a list of integers >= 1 (the release's: [50,100,150,200])")
+    source = cfg.train.positives_from
+    if source is not None and (not isinstance(source, str) or not source):
+        raise bad("train.positives_from", source, "null or the output_dir of a run trained with "
+                  "train.save_positives=true")
     if not isinstance(cfg.reward.certainty_scaling, bool):
         raise bad("reward.certainty_scaling", cfg.reward.certainty_scaling, "true or false")
     if cfg.reward.certainty_scaling and directional is None:
@@ -216,6 +229,35 @@ def resolve_device(name: str, train_device: str | None = None) -> torch.device:
     if device.type == "cuda" and not torch.cuda.is_available():
         raise ValueError("auto or cpu: torch finds no CUDA GPU on this machine")
     return device
+
+
+#: What a run giving its saved positives to another must share with it: the layout always, the
+#: frames and the encoder when the receiving run embeds them.
+_LAYOUT_KEYS = ("env.task", "env.seed")
+_FRAME_KEYS = ("env.image_size", "env.camera", "env.fast_render", "encoder.name",
+               "encoder.checkpoint", "encoder.options")
+
+
+def check_positives_source(cfg: DictConfig, source_config: dict[str, Any]) -> None:
+    """Raise unless the run in ``train.positives_from`` (its saved ``source_config``) made its
+    positives with this run's task, layout and, when this run has a VLM reward, frames and
+    encoder."""
+    source = OmegaConf.create(source_config)
+    keys = _LAYOUT_KEYS + (_FRAME_KEYS if uses_vlm_reward(cfg) else ())
+    if uses_vlm_reward(cfg) and not uses_vlm_reward(source):
+        raise ValueError(f"config train.positives_from={cfg.train.positives_from!r} is a run "
+                         "without a VLM reward: its positives carry no embeddings. Take them "
+                         "from a run with this run's encoder.")
+    for key in keys:
+        theirs, ours = OmegaConf.select(source, key), OmegaConf.select(cfg, key)
+        if isinstance(theirs, DictConfig):
+            theirs, ours = OmegaConf.to_container(theirs), OmegaConf.to_container(ours)
+        if theirs != ours:
+            raise ValueError(
+                f"config train.positives_from={cfg.train.positives_from!r} was trained with "
+                f"{key}={theirs!r}, this run has {key}={ours!r}: preloaded positives must come "
+                "from the same task, layout (env.seed), frames and encoder. Use a source run "
+                f"with {key}={ours!r}.")
 
 
 def uses_vlm_reward(cfg: DictConfig) -> bool:

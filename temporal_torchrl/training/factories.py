@@ -13,7 +13,7 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
-from tensordict.nn import CudaGraphModule, TensorDictModule
+from tensordict.nn import CudaGraphModule, TensorDictModule, TensorDictModuleBase
 from tensordict.nn.distributions import NormalParamExtractor
 from torch import nn
 from torchrl.collectors import Collector
@@ -23,7 +23,13 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
 from torchrl.record.loggers import CSVLogger, Logger, WandbLogger
 
-from temporal_torchrl.data import EpisodeReplayBuffer, embed_episode
+from temporal_torchrl.data import (
+    EpisodeReplayBuffer,
+    embed_episode,
+    episode_rows,
+    goal_image_embedding,
+    goal_image_from_rows,
+)
 from temporal_torchrl.encoders import Encoder, load_encoder
 from temporal_torchrl.envs import (
     EXPERT_MAX_STEPS,
@@ -32,8 +38,17 @@ from temporal_torchrl.envs import (
     make_temporal_reward,
 )
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.training.config import none_or_name, resolve_device
+from temporal_torchrl.training.config import (
+    check_positives_source,
+    none_or_name,
+    resolve_device,
+)
+from temporal_torchrl.training.relay import RelayExploration, RelayPolicy, RelaySchedule
+from temporal_torchrl.training.run import RunDirectory
 from temporal_torchrl.training.trainer import RewardHeadTrainer
+
+#: Added to env.seed for the relay agent's initial weights.
+RELAY_SEED_OFFSET = 10_007
 
 
 def make_encoder(cfg: DictConfig) -> Encoder:
@@ -93,6 +108,73 @@ def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
         steps_after_success=cfg.train.expert_steps_after_success)
     return [embed_episode(episode, encoder) if encoder is not None else episode
             for episode in experts]
+
+
+def make_preloaded_positives(cfg: DictConfig, encoder: Encoder | None, finetune: bool
+                             ) -> tuple[list[TensorDict], torch.Tensor | None]:
+    """Stage 2's preloaded positives as stored rows, and the goal image s_g (None without
+    finetuned heads).
+
+    ``train.preload_positives`` episodes: the first ones another run saved
+    (``train.positives_from``, the release's route), or scripted-expert episodes of the run's
+    layout and frames, whole unless ``train.expert_steps_after_success`` cuts them. s_g is the
+    first success state of the first of them (stage 1: of one scripted expert).
+    """
+    dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
+    count = cfg.train.preload_positives
+    if cfg.train.positives_from is not None and count > 0:
+        rows = saved_positives(cfg, count)
+        goal = goal_image_from_rows(rows[0]) if finetune else None
+        if encoder is None:  # SAC without a VLM reward stores no embeddings
+            return [episode.exclude("embedding") for episode in rows], goal
+        for episode in rows:
+            episode["embedding"] = episode["embedding"].to(dtype)
+        return rows, goal
+    if count == 0 and not finetune:
+        return [], None
+    experts = make_expert_episodes(cfg, encoder, max(count, 1))
+    goal = goal_image_embedding(experts[0]) if finetune else None
+    return [episode_rows(expert, embedding_dtype=dtype) for expert in experts[:count]], goal
+
+
+def saved_positives(cfg: DictConfig, count: int) -> list[TensorDict]:
+    """The first ``count`` positives the run in ``train.positives_from`` saved
+    (``train.save_positives``), checked to come from this run's task, layout, frames and
+    encoder."""
+    source = RunDirectory(cfg.train.positives_from)
+    if not (source.path / "config.json").is_file():
+        raise FileNotFoundError(
+            f"config train.positives_from={str(source.path)!r}: no run directory there (no "
+            "config.json). Pass the output_dir of a run trained with train.save_positives=true.")
+    check_positives_source(cfg, source.config())
+    saved = source.saved_positive_count()
+    if saved < count:
+        raise ValueError(
+            f"config train.positives_from={str(source.path)!r} holds {saved} saved positive "
+            f"episodes, fewer than train.preload_positives={count}: train the source run longer "
+            "(resume=true train.episodes=<more>) or preload fewer.")
+    return list(source.positive_episodes(count))
+
+
+def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor,
+               positive_states: int) -> RelayExploration:
+    """FuRL's relay exploration (``train.relay*``): a second SAC agent on the sparse task reward,
+    built from its own seed so the run's other random streams are those of a run without relay;
+    off from the start when ``positive_states`` already meet ``train.relay_threshold``."""
+    schedule = RelaySchedule(cfg.env.num_envs, list(cfg.train.relay_periods),
+                             cfg.train.relay_threshold, seed=cfg.env.seed,
+                             active=positive_states < cfg.train.relay_threshold)
+    # SACLoss draws the second critic's initial weights too.
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(cfg.env.seed + RELAY_SEED_OFFSET)
+        relay_actor, relay_qvalue = make_sac_agent(cfg, env)
+        loss, target_updater, optimizer = make_sac_loss(cfg, relay_actor, relay_qvalue,
+                                                        env.action_spec.shape[-1])
+    device = resolve_device(cfg.train.device)
+    policy = RelayPolicy(actor, relay_actor, schedule, env.action_spec_unbatched.to(device),
+                         noise=cfg.train.relay_noise)
+    return RelayExploration(policy, loss, optimizer,
+                            make_sac_update(cfg, loss, target_updater, optimizer))
 
 
 def make_replay_buffer(cfg: DictConfig, capacity: int,
@@ -181,7 +263,7 @@ def make_sac_update(cfg: DictConfig, loss: SACLoss, target_updater: SoftUpdate,
     return update
 
 
-def make_collector(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor,
+def make_collector(cfg: DictConfig, env: EnvBase, actor: TensorDictModuleBase,
                    random_frames: int) -> Collector:
     """One vector step (``env.num_envs`` env steps) per iteration, so every step is followed by
     its updates (the thesis's schedule); uniform random actions for the first ``random_frames``

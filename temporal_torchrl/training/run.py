@@ -6,6 +6,8 @@ leaves one half-written)::
     <run>/config.json       the resolved config the run started with
     <run>/episodes.csv      one row per finished episode (:data:`EPISODE_COLUMNS`)
     <run>/replay/NNNNNN.pt  the stored rows of every episode inserted into the replay buffer
+    <run>/positives/EEEEEE.pt  with train.save_positives: the rows of each successful training
+                            episode, whole, by episode number (train.positives_from reads them)
     <run>/checkpoint.pt     networks, optimizers, counters, RNG states (every few episodes)
     <run>/summary.json      TTFS, TT50S, RAS, throughput (when the run has ended)
     <run>/logs/, wandb/     the logger's files
@@ -47,6 +49,7 @@ from tensordict import TensorDict, TensorDictBase
 EPISODE_COLUMNS = ("episode", "env_steps", "success", "return", "mean_vlm_reward", "stage")
 CHECKPOINT = "checkpoint.pt"
 REPLAY_DIR = "replay"
+POSITIVES_DIR = "positives"
 
 
 class RunDirectory:
@@ -132,6 +135,34 @@ class RunDirectory:
         for index in range(count):
             data = torch.load(self.path / REPLAY_DIR / f"{index:06d}.pt", weights_only=True)
             yield TensorDict(data, [data["step"].shape[0]])
+
+    # ------------------------------------------------------------------ saved positives
+    def save_positive_episode(self, episode: int, rows: TensorDictBase) -> None:
+        """Save the rows of training episode ``episode`` (1-based), a successful one."""
+        directory = self.path / POSITIVES_DIR
+        directory.mkdir(exist_ok=True)
+        path = directory / f"{episode:06d}.pt"
+        torch.save(rows.cpu().to_dict(), path.with_suffix(".tmp"))
+        path.with_suffix(".tmp").replace(path)
+
+    def _positive_paths(self) -> list[Path]:
+        directory = self.path / POSITIVES_DIR
+        return sorted(directory.glob("*.pt")) if directory.is_dir() else []
+
+    def saved_positive_count(self) -> int:
+        return len(self._positive_paths())
+
+    def positive_episodes(self, count: int) -> Iterator[TensorDict]:
+        """The rows of the first ``count`` saved positives, in episode order."""
+        for path in self._positive_paths()[:count]:
+            data = torch.load(path, weights_only=True)
+            yield TensorDict(data, [data["step"].shape[0]])
+
+    def truncate_positives(self, episodes: int) -> None:
+        """Drop the positives saved after the checkpoint's ``episodes`` (they are re-run)."""
+        for path in self._positive_paths():
+            if int(path.stem) > episodes:
+                path.unlink()
 
     # ------------------------------------------------------------------ checkpoint, summary
     def save_checkpoint(self, state: dict[str, Any]) -> None:
