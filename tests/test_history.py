@@ -7,7 +7,8 @@ from tensordict import TensorDict
 from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
-from temporal_torchrl.transforms import EmbeddingHistoryTransform, episode_windows
+from temporal_torchrl.data import episode_history
+from temporal_torchrl.transforms import EmbeddingHistoryTransform
 
 ELEMENT, EPISODE, STEP = 0, 1, 2  # channels of the mock embedding
 
@@ -45,15 +46,19 @@ def test_window_across_episodes_never_crosses_a_start(k, window_length):
         torch.testing.assert_close(nxt["embedding_window"][i], expected)
         torch.testing.assert_close(nxt["previous_embedding"][i],
                                    mock_embedding(0, episode, max(t - k, 0), 6))
-    # At the reset frame the window is s_0 repeated; one episode's window is episode_windows.
+    # At the reset frame the window is s_0 repeated; one episode's history is episode_history's
+    # (the arithmetic the replay and the reports use).
     starts = rollout["embedding"][:, STEP] == 0
     torch.testing.assert_close(rollout["embedding_window"][starts],
                                rollout["embedding"][starts].unsqueeze(1).expand(-1,
                                                                                window_length, -1))
     first = torch.cat([rollout["embedding"][:1], nxt["embedding"][:4]])
-    torch.testing.assert_close(episode_windows(first, window_length),
-                               torch.cat([rollout["embedding_window"][:1],
-                                          nxt["embedding_window"][:4]]))
+    history = episode_history(first, k, window_length)
+    torch.testing.assert_close(history["window"], torch.cat([rollout["embedding_window"][:1],
+                                                             nxt["embedding_window"][:4]]))
+    torch.testing.assert_close(history["previous"],
+                               torch.cat([rollout["previous_embedding"][:1],
+                                          nxt["previous_embedding"][:4]]))
 
 
 def test_batched_windows_restart_only_the_reset_elements():
@@ -121,7 +126,7 @@ def test_errors():
     with pytest.raises(ValueError, match="window_length=1"):
         EmbeddingHistoryTransform(window_length=1)
     with pytest.raises(ValueError, match="window_length=1"):
-        episode_windows(torch.zeros(3, 2), 1)
+        episode_history(torch.zeros(3, 2), k=1, window_length=1)
     history = EmbeddingHistoryTransform()
     with pytest.raises(RuntimeError, match="reset"):
         history._step(TensorDict(), TensorDict({"embedding": torch.zeros(3)}))

@@ -132,7 +132,9 @@ def test_finetuning_batches_never_hold_the_reset_frame():
     for key in ("negative", "positive", ("positive_pair", "earlier")):
         assert (batch[key]["step"] >= 1).all(), key
     assert set(batch["negative", "step"].tolist()) == set(range(1, 21))
-    assert set(batch["positive", "step"].tolist()) == set(range(1, 17))
+    # positives: FuRL's valid ones, s_11 .. s_16 (gap 10); their partners reach down to s_1
+    assert set(batch["positive", "step"].tolist()) == set(range(11, 17))
+    assert set(batch["positive_pair", "earlier", "step"].tolist()) == set(range(1, 7))
 
 
 def test_directional_release_option_scores_contrast_at_plain_position():

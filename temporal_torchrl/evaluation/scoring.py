@@ -25,6 +25,7 @@ import torch
 from tensordict import TensorDictBase
 from torch import Tensor
 
+from temporal_torchrl.data import episode_history
 from temporal_torchrl.envs import first_success_index
 from temporal_torchrl.evaluation.metrics import auroc, direction_accuracy, value_order_correlation
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, TemporalReward
@@ -81,13 +82,8 @@ def state_rewards(reward: TemporalReward, states: Tensor) -> Tensor:
     Index 0 is the reset frame's value (zero direction for a directional reward); the env
     rewards indices 1 .. N-1.
     """
-    steps = torch.arange(states.shape[0])
-    first = states[:1].expand_as(states)
-    previous = states[(steps - reward.k).clamp_min(0)]
-    window = None
-    if reward.window_length is not None:
-        offsets = torch.arange(reward.window_length - 1, -1, -1)
-        window = states[(steps.unsqueeze(-1) - offsets).clamp_min(0)]
+    history = episode_history(states, reward.k, reward.window_length)
+    first, previous, window = history["initial"], history["previous"], history["window"]
     if reward_kind(reward) == POSITIONAL_KIND:
         return reward.positional_reward(states, first, previous, window=window)
     return reward.directional_reward(states, previous, first, window=window)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from temporal_torchrl.data import NEGATIVE
+from temporal_torchrl.data import NEGATIVE, episode_history
 from temporal_torchrl.experiments.runs import CONFIG_FILE, none_if_none
 from temporal_torchrl.rewards import TemporalReward
 
@@ -89,16 +89,11 @@ def episode_rewards(reward: TemporalReward,
     them: s_0, s_{t-k} and (for a sequence reward) the window of the last K embeddings, never
     before state 0; r_D with its certainty scaling when the reward has one."""
     embeddings = embeddings.float()
-    steps = torch.arange(embeddings.shape[0])
-    previous = embeddings[torch.clamp(steps - reward.k, min=0)]
-    initial = embeddings[:1].expand_as(embeddings)
-    window = None
-    if reward.window_length is not None:
-        offsets = torch.arange(reward.window_length - 1, -1, -1)
-        window = embeddings[torch.clamp(steps.unsqueeze(-1) - offsets, min=0)]
+    history = episode_history(embeddings, reward.k, reward.window_length)
     success = torch.zeros(embeddings.shape[0], 1, dtype=torch.bool)
     with torch.no_grad():
-        parts = reward(embeddings, initial, previous, success, window=window)
+        parts = reward(embeddings, history["initial"], history["previous"], success,
+                       window=history["window"])
     positional = (parts["positional_reward"].squeeze(-1).numpy()
                   if reward.positional is not None else None)
     directional = (parts["directional_reward"].squeeze(-1).numpy()

@@ -10,7 +10,6 @@ from temporal_torchrl.transforms.embedding import EmbeddingTransform
 from temporal_torchrl.transforms.history import (
     WINDOW_KEY,
     EmbeddingHistoryTransform,
-    episode_windows,
 )
 from temporal_torchrl.transforms.render import RenderTransform
 from temporal_torchrl.transforms.reward import TemporalRewardTransform
@@ -21,5 +20,4 @@ __all__ = [
     "EmbeddingTransform",
     "RenderTransform",
     "TemporalRewardTransform",
-    "episode_windows",
 ]

@@ -17,19 +17,6 @@ PREVIOUS_EMBEDDING_KEY = "previous_embedding"
 WINDOW_KEY = "embedding_window"
 
 
-def episode_windows(embeddings: Tensor, window_length: int) -> Tensor:
-    """The window s_{t-K+1} .. s_t of every state of one episode ``embeddings [T, D]`` (s_0
-    first), padded with s_0 where it would reach before the episode: ``[T, K, D]``.
-
-    The same windows the history transform writes during collection and the replay buffer
-    derives from stored rows, for a whole episode at once (scoring, tests).
-    """
-    check_window_length(window_length)
-    steps = torch.arange(embeddings.shape[0], device=embeddings.device)
-    offsets = torch.arange(window_length - 1, -1, -1, device=embeddings.device)
-    return embeddings[(steps.unsqueeze(-1) - offsets).clamp_min(0)]
-
-
 class EmbeddingHistoryTransform(Transform):
     """Writes ``"initial_embedding"`` (s_0) and ``"previous_embedding"`` (s_{t-k}) at every step,
     and with ``window_length`` also ``"embedding_window"`` (s_{t-K+1} .. s_t, ``[K, D]``).
