@@ -17,8 +17,9 @@ Outputs in ``output_dir`` (default: ``runs/<task>/<method>_<protocol>/seed<seed>
 :mod:`temporal_torchrl.training.run`): ``episodes.csv`` (episode, env_steps, success, return =
 sum of sparse task rewards, mean_vlm_reward, stage), ``summary.json`` (TTFS, TT50S, RAS,
 throughput, the resolved config, the last training metrics), ``checkpoint.pt`` + ``replay/``
-(resume), ``logs/`` (CSV logger: per-episode rows and, every ``logger.log_every`` updates, SAC's
-and the heads' losses and the relabelled reward statistics) or ``wandb/``.
+(resume), ``metrics.jsonl`` (whatever ``logger.backend``: per-episode rows and, every
+``logger.log_every`` updates, SAC's and the heads' losses and the relabelled reward statistics;
+what reports read) and the same in ``logs/`` (CSV logger) or ``wandb/``.
 """
 
 from __future__ import annotations
@@ -133,6 +134,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         for rows in run.replay_episodes(inserted):
             buffer.extend(rows)
         run.truncate_episodes(episode)
+        run.truncate_metrics(env_steps)
     collector = factories.make_collector(cfg, env, actor,
                                          max(0, cfg.train.random_steps - env_steps))
     if state is not None:  # after every random draw the build makes
