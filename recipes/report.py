@@ -3,18 +3,27 @@
     python recipes/report.py runs/ --out reports/all
     python recipes/report.py runs/door-open runs/push --out reports/two --metrics sac/loss_qvalue
     python recipes/report.py runs/ --out reports/all --figure-run runs/door-open/<config>/seed0
+    python recipes/report.py sweeps/table_5_12 --out reports/t --baseline "FuRL ρ=0.05"
 
 Finds every run directory (a directory with ``config.json``) under the given directories,
 groups runs that differ only in the seed (printing the config keys that tell the groups apart)
 and writes into ``--out``:
 
-- ``ras.md``/``.csv``, ``ttfs.md``/``.csv``, ``tt50s.md``/``.csv``: tasks as rows,
-  configurations as columns, mean ± std (n seeds), Average row, best in bold; the CSV adds 95%
-  bootstrap CIs of the mean; both put the thesis's published value and the difference beside
-  the configurations it reports;
+- ``ras.md``/``.csv``, ``ttfs.md``/``.csv``, ``tt50s.md``/``.csv``: the thesis's layout, tasks
+  as rows, configurations as columns, mean ± std (n seeds), Average row, best in bold, the
+  thesis's published value and the difference beside the configurations it reports;
+- ``aggregates.md``/``.csv``: per metric and configuration, over all its tasks and seeds, the
+  IQM and mean of normalised scores and the probability of improvement over ``--baseline``
+  (default SAC), each with a 95% stratified-bootstrap CI, computed with rliable
+  (:mod:`temporal_torchrl.experiments.reliable`; scores: RAS / 100, and 1 - TTFS / 1000 with
+  runs that have not reached the success scored 0);
+- ``aggregate_<metric>.png`` (IQM and mean with their CIs), ``performance_profiles.png``
+  (fraction of runs above each score, with CI bands) and ``probability_of_improvement.png``,
+  drawn with ``rliable.plot_utils``;
 - ``runs.csv``: every run with its episodes and metrics (or why it has none yet);
 - ``success_curves.png``: running-average success (window 150) per task and configuration;
-- ``metric_<key>.png`` for each ``--metrics`` key (from the runs' CSV or offline wandb logs);
+- ``metric_<key>.png`` for each ``--metrics`` key (from the runs' ``metrics.jsonl``; older runs:
+  their CSV logs);
 - ``reward_curves.png`` with ``--figure-run``: r_P and r_D along a positive and a negative
   episode, from that run's saved heads (Figure 5.12);
 - ``report.md``: all of the above in one page.
@@ -28,7 +37,9 @@ import re
 from pathlib import Path
 
 from temporal_torchrl.experiments import (
+    DEFAULT_BASELINE,
     METRICS,
+    build_reliable_table,
     build_table,
     find_runs,
     group_runs,
@@ -37,15 +48,22 @@ from temporal_torchrl.experiments import (
     reward_curves,
 )
 from temporal_torchrl.experiments.plots import (
+    configuration_colours,
+    plot_aggregate_intervals,
+    plot_improvement,
     plot_logged_metric,
+    plot_performance_profiles,
     plot_reward_curves,
     plot_success_curves,
 )
 from temporal_torchrl.experiments.runs import configuration_name, configuration_settings
 from temporal_torchrl.experiments.tables import (
     CSV_COLUMNS,
+    RELIABLE_COLUMNS,
     RUN_COLUMNS,
     grouping_markdown,
+    reliable_markdown,
+    reliable_rows,
     run_rows,
     table_markdown,
     table_rows,
@@ -60,10 +78,17 @@ HOW_TO_READ = """\
 - TTFS / TT50S are the episode of the first / 50th success. A run that reached 1,000 episodes
   without it counts 1,000 (the thesis's convention); a shorter run without it is *censored*
   (`> N ep`: not reached in its N episodes) and is not averaged.
-- A cell's mean ± sample std and its n are over the runs that have a value; the CSV adds the 95%
-  percentile-bootstrap CI of the mean ({resamples} resamples, seed {seed}).
+- A cell's mean ± sample std and its n are over the runs that have a value, as the thesis
+  prints them. With a few seeds a mean says little: the rliable section gives intervals.
 - The thesis's values are LIV's (4 seeds); runs with another encoder are compared with them
   all the same, and the Note column says so.
+- *Over tasks and seeds (rliable)*: each configuration's runs on all its tasks, scored in
+  [0, 1] (higher is better): RAS / 100; for TTFS and TT50S, 1 − TTFS / 1000, with a run that
+  has not reached the success (within 1,000 episodes, or censored before) scored 0, a lower
+  bound. The interquartile mean (IQM, the mean of the middle 50% of the run scores) and the
+  mean, and the probability of improvement P(X > {baseline}) (a run of X scores more than a run
+  of {baseline} on the same task), each with a 95% stratified-bootstrap CI ({resamples}
+  resamples, seed {seed}), as Agarwal et al. (NeurIPS 2021) recommend, computed with rliable.
 """
 
 
@@ -82,8 +107,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "the last failed training episode)")
     parser.add_argument("--metrics", nargs="*", default=[],
                         help="logged metrics to plot, e.g. sac/loss_qvalue relabelled/r_P_mean")
-    parser.add_argument("--bootstrap", type=int, default=10_000,
-                        help="bootstrap resamples for the 95%% CIs (default 10000)")
+    parser.add_argument("--baseline", default=None, metavar="LABEL",
+                        help="the configuration the probability of improvement compares with, "
+                             f"by its label as printed (default {DEFAULT_BASELINE!r}; when no "
+                             "configuration has it, the report says so)")
+    parser.add_argument("--bootstrap", type=int, default=2000,
+                        help="stratified-bootstrap resamples for the 95%% CIs (default 2000)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
     args = parser.parse_args(argv)
     if args.bootstrap < 1:
@@ -111,22 +140,28 @@ def metric_file(key: str) -> str:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     groups = group_runs(find_runs(args.dirs))
+    labels = [group.label for group in groups]
+    if args.baseline is not None and args.baseline not in labels:
+        raise SystemExit(f"--baseline {args.baseline!r}: no configuration has that label; "
+                         f"the configurations are: {'; '.join(map(repr, labels))}.")
+    baseline = args.baseline or DEFAULT_BASELINE
     scalars = {run.path: logged_scalars(run.path) for group in groups for run in group.runs
                if args.metrics}
     logged = set().union(*scalars.values())
     for key in args.metrics:
         if key not in logged:
-            raise SystemExit(f"--metrics {key}: no run logged it (looked in logs/*/scalars and "
-                             f"wandb/offline-run-*); logged keys: "
+            raise SystemExit(f"--metrics {key}: no run logged it (looked in each run's "
+                             f"metrics.jsonl, else its logs/*/scalars); logged keys: "
                              f"{', '.join(sorted(logged)) or 'none'}.")
     args.out.mkdir(parents=True, exist_ok=True)
     sections = ["# Report", "", f"Runs from: {', '.join(map(str, args.dirs))}", "",
-                HOW_TO_READ.format(resamples=args.bootstrap, seed=args.seed),
+                HOW_TO_READ.format(resamples=args.bootstrap, seed=args.seed,
+                                   baseline=baseline),
                 grouping_markdown(groups)]
     print(grouping_markdown(groups))
 
     for metric in METRICS:
-        table = build_table(groups, metric, resamples=args.bootstrap, seed=args.seed)
+        table = build_table(groups, metric)
         markdown = table_markdown(table)
         (args.out / f"{metric}.md").write_text(markdown)
         write_csv(args.out / f"{metric}.csv", table_rows(table), CSV_COLUMNS)
@@ -134,7 +169,28 @@ def main(argv: list[str] | None = None) -> None:
         print(markdown)
     write_csv(args.out / "runs.csv", run_rows(groups), RUN_COLUMNS)
 
+    reliable = [build_reliable_table(groups, metric, baseline=baseline, reps=args.bootstrap,
+                                     seed=args.seed) for metric in METRICS]
+    aggregates = "\n".join(["## Over tasks and seeds (rliable)", "",
+                            *map(reliable_markdown, reliable)])
+    (args.out / "aggregates.md").write_text(aggregates)
+    write_csv(args.out / "aggregates.csv",
+              [row for table in reliable for row in reliable_rows(table)], RELIABLE_COLUMNS)
+    sections.append(aggregates)
+    print(aggregates)
+
     figures = ["## Figures"]
+    colours = configuration_colours(labels)
+    for table in reliable:
+        if table.scored:
+            name = f"aggregate_{table.metric.name}.png"
+            plot_aggregate_intervals(table, args.out / name, colours)
+            figures.append(f"![{table.metric.title}: IQM and mean with 95% CIs]({name})")
+    plot_performance_profiles(reliable, args.out / "performance_profiles.png", colours)
+    figures.append("![performance profiles](performance_profiles.png)")
+    plot_improvement(reliable, args.out / "probability_of_improvement.png", colours)
+    figures.append(f"![probability of improvement over {baseline}]"
+                   "(probability_of_improvement.png)")
     plot_success_curves(groups, args.out / "success_curves.png")
     figures.append("![running-average success](success_curves.png)")
     for key in args.metrics:
@@ -155,7 +211,7 @@ def main(argv: list[str] | None = None) -> None:
     sections.append("\n\n".join(figures) + "\n")
     (args.out / "report.md").write_text("\n".join(sections))
     print(f"wrote {args.out}: report.md, {', '.join(f'{m}.md/.csv' for m in METRICS)}, "
-          "runs.csv and the figures")
+          "aggregates.md/.csv, runs.csv and the figures")
 
 
 if __name__ == "__main__":

@@ -17,8 +17,9 @@ Outputs in ``output_dir`` (default: ``runs/<task>/<method>_<protocol>/seed<seed>
 :mod:`temporal_torchrl.training.run`): ``episodes.csv`` (episode, env_steps, success, return =
 sum of sparse task rewards, mean_vlm_reward, stage), ``summary.json`` (TTFS, TT50S, RAS,
 throughput, the resolved config, the last training metrics), ``checkpoint.pt`` + ``replay/``
-(resume), ``logs/`` (CSV logger: per-episode rows and, every ``logger.log_every`` updates, SAC's
-and the heads' losses and the relabelled reward statistics) or ``wandb/``.
+(resume), ``metrics.jsonl`` (whatever ``logger.backend``: per-episode rows and, every
+``logger.log_every`` updates, SAC's and the heads' losses and the relabelled reward statistics;
+what reports read) and the same in ``logs/`` (CSV logger) or ``wandb/``.
 """
 
 from __future__ import annotations
@@ -132,6 +133,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
             buffer.extend(rows)
         run.truncate_episodes(episode)
         run.truncate_positives(episode)
+        run.truncate_metrics(env_steps)
     relay = (factories.make_relay(cfg, env, actor, buffer.num_positive_states)
              if cfg.train.relay and trainer is not None else None)
     if relay is not None and state is not None:

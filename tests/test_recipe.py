@@ -276,12 +276,19 @@ def test_kill_and_resume_continues_the_run(tmp_path):
     # a killed run leaves an episode row the checkpoint may not cover: it is dropped on resume
     RunDirectory(run_dir).append_episode({"episode": 3, "env_steps": 999, "success": 0,
                                        "return": 0.0, "mean_vlm_reward": 0.0, "stage": 1})
+    RunDirectory(run_dir).append_metrics(999, {"train/success": 0.0})  # and a metrics point
     with pytest.raises(FileExistsError, match="resume=true"):
         sac_temporal.train(config(tmp_path, "train.episodes=4"))
     summary = sac_temporal.train(config(tmp_path, "train.episodes=4", "resume=true"))
     rows = episode_rows(run_dir)
     assert [int(row["episode"]) for row in rows] == [1, 2, 3, 4]
     assert [int(row["env_steps"]) for row in rows] == [20, 40, 60, 80]
+    # metrics.jsonl with logger.backend=none: the episode points once each, then the summary
+    points = RunDirectory(run_dir).metric_points()
+    assert [point["step"] for point in points] == [20, 40, 60, 80, 80]
+    assert [point["train/success"] for point in points[:4]] == [
+        float(row["success"]) for row in rows]
+    assert set(points[4]) == {"step", "summary/ttfs", "summary/tt50s"}
     assert summary["episodes"] == 4 and summary["env_steps"] == 80
     assert RunDirectory(run_dir).load_checkpoint()["inserted"] == 4
 

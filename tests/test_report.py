@@ -22,7 +22,6 @@ from temporal_torchrl.data import NEGATIVE
 from temporal_torchrl.envs import EVALUATION_TASKS, get_task
 from temporal_torchrl.experiments import (
     Configuration,
-    bootstrap_ci,
     build_table,
     find_published,
     find_runs,
@@ -33,9 +32,24 @@ from temporal_torchrl.experiments import (
     run_value,
 )
 from temporal_torchrl.experiments.aggregate import CENSORED, INCOMPLETE
+from temporal_torchrl.experiments.logs import csv_scalars
+from temporal_torchrl.experiments.reliable import (
+    Scores,
+    aggregate_intervals,
+    build_reliable_table,
+    performance_profile,
+    probability_of_improvement,
+    run_score,
+)
 from temporal_torchrl.experiments.reward_curves import EXPERT, FAILED
 from temporal_torchrl.experiments.runs import distinguishing_keys
-from temporal_torchrl.experiments.tables import grouping_markdown, table_markdown, table_rows
+from temporal_torchrl.experiments.tables import (
+    grouping_markdown,
+    reliable_markdown,
+    reliable_rows,
+    table_markdown,
+    table_rows,
+)
 from temporal_torchrl.rewards import TemporalReward
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
@@ -103,7 +117,7 @@ def test_means_and_stds_over_seeds(tmp_path):
     expected = {"ras": [100.0, 70 / 150 * 100], "ttfs": [151.0, 161.0],
                 "tt50s": [200.0, 259.0]}
     for metric, values in expected.items():
-        row = rows_by(build_table(groups, metric, resamples=200), "drawer-open")["FuRL ρ=0.05"]
+        row = rows_by(build_table(groups, metric), "drawer-open")["FuRL ρ=0.05"]
         assert float(row["mean"]) == pytest.approx(sum(values) / 2, rel=1e-5)
         # sample std of two values: |a - b| / sqrt(2)
         assert float(row["std"]) == pytest.approx(abs(values[0] - values[1]) / math.sqrt(2),
@@ -111,37 +125,12 @@ def test_means_and_stds_over_seeds(tmp_path):
         assert (row["n"], row["runs"], row["status"]) == ("2", "2", "complete")
 
 
-def test_bootstrap_ci_is_right_and_deterministic():
-    # Resampling [0, 100] twice gives means 0, 50, 100 with probabilities 1/4, 1/2, 1/4.
-    assert bootstrap_ci([[0.0, 100.0]], resamples=4000, seed=0) == (0.0, 100.0)
-    values = [41.0, 55.0, 47.0, 60.0, 38.0, 52.0, 66.0, 44.0]
-    ci = bootstrap_ci([values], resamples=500, seed=3)
-    assert ci == bootstrap_ci([values], resamples=500, seed=3)
-    assert ci != bootstrap_ci([values], resamples=500, seed=4)
-    assert min(values) <= ci[0] < np.mean(values) < ci[1] <= max(values)
-    assert bootstrap_ci([[5.0]]) is None
-    # The Average row's CI: tasks resampled separately, centred on the mean of task means.
-    low, high = bootstrap_ci([values, [10.0, 12.0]], resamples=2000, seed=0)
-    assert low < (np.mean(values) + 11.0) / 2 < high
-
-
-def test_cell_ci_contains_mean(tmp_path):
-    for seed, offset in enumerate((0, 3, 7)):
-        make_run(tmp_path, f"s{seed}", [False] * (150 + offset) + [True] * (150 - offset),
-                 *FURL, f"env.seed={seed}")
-    table = build_table(group_runs(find_runs([tmp_path])), "ras", resamples=500, seed=1)
-    row = rows_by(table, "drawer-open")["FuRL ρ=0.05"]
-    assert float(row["ci95_low"]) <= float(row["mean"]) <= float(row["ci95_high"])
-    assert row == rows_by(build_table(group_runs(find_runs([tmp_path])), "ras", resamples=500,
-                                      seed=1), "drawer-open")["FuRL ρ=0.05"]
-
-
 def test_incomplete_run_is_shown_with_its_episode_count(tmp_path):
     make_run(tmp_path, "s0", SEED0, *FURL, "env.seed=0", finished=True)
     make_run(tmp_path, "s1", SEED1, *FURL, "env.seed=1", finished=True)
     make_run(tmp_path, "s2", [True] * 120, *FURL, "env.seed=2")  # killed at 120 of 300
     make_run(tmp_path, "rho1", [True] * 80, *FURL, "reward.rho=1.0", "env.seed=0")
-    table = build_table(group_runs(find_runs([tmp_path])), "ras", resamples=200)
+    table = build_table(group_runs(find_runs([tmp_path])), "ras")
     rows = rows_by(table, "drawer-open")
     partial = rows["FuRL ρ=0.05"]
     assert partial["n"] == "2" and partial["runs"] == "3" and partial["status"] == "partial"
@@ -178,7 +167,7 @@ def test_ttfs_censored_below_the_horizon_and_capped_at_it(tmp_path):
     assert (run_value(long_run, "ttfs").value, run_value(long_run, "tt50s").value) == (1000, 1000)
     assert run_value(few_run, "ttfs").value == 1
     assert run_value(few_run, "tt50s").status == CENSORED
-    table = build_table(group_runs(find_runs([tmp_path])), "ttfs", resamples=200)
+    table = build_table(group_runs(find_runs([tmp_path])), "ttfs")
     assert markdown_row(table_markdown(table), "drawer-open")[1] == \
         "500 ± 706 (n=2); 1 censored: > 120 ep"
 
@@ -223,9 +212,9 @@ def test_best_is_bold_highest_ras_lowest_ttfs(tmp_path):
     make_run(tmp_path, "a", SEED0, *FURL)  # RAS 100, TTFS 151
     make_run(tmp_path, "b", SEED1, *FURL, "reward.rho=1.0")  # RAS 46.7, TTFS 161
     groups = group_runs(find_runs([tmp_path]))
-    ras_row = markdown_row(table_markdown(build_table(groups, "ras", resamples=10)),
+    ras_row = markdown_row(table_markdown(build_table(groups, "ras")),
                            "drawer-open")
-    ttfs_row = markdown_row(table_markdown(build_table(groups, "ttfs", resamples=10)),
+    ttfs_row = markdown_row(table_markdown(build_table(groups, "ttfs")),
                             "drawer-open")
     assert ras_row[1:] == ["**100.0** (n=1)", "46.7 (n=1)"]
     assert ttfs_row[1:] == ["**151** (n=1)", "161 (n=1)"]
@@ -233,7 +222,7 @@ def test_best_is_bold_highest_ras_lowest_ttfs(tmp_path):
     make_run(tmp_path, "c", [True] * 300, *FURL, "reward.rho=2.0", "env.seed=0")
     make_run(tmp_path, "d", [True] * 30, *FURL, "reward.rho=2.0", "env.seed=1")
     groups = group_runs(find_runs([tmp_path]))
-    row = markdown_row(table_markdown(build_table(groups, "ras", resamples=10)), "drawer-open")
+    row = markdown_row(table_markdown(build_table(groups, "ras")), "drawer-open")
     assert row[1] == "**100.0** (n=1)" and row[3].startswith("100.0 (n=1)")
 
 
@@ -280,7 +269,7 @@ def test_published_value_matched_and_difference(tmp_path):
     make_run(tmp_path, "s1", SEED1, *FURL, "env.seed=1", "encoder.name=metaworld_small")
     make_run(tmp_path, "p2", SEED0, "preset=p2", "protocol=stage2", "reward.rho=0.1")
     groups = group_runs(find_runs([tmp_path]))
-    table = build_table(groups, "ras", resamples=100)
+    table = build_table(groups, "ras")
     rows = rows_by(table, "drawer-open")
     furl = rows["FuRL ρ=0.05 [metaworld_small]"]
     assert (furl["published_tables"], furl["published_mean"]) == ("5.4 5.5 5.6", "41.7")
@@ -293,11 +282,151 @@ def test_published_value_matched_and_difference(tmp_path):
     make_run(tmp_path, "d3", [False] * 270 + [True], "preset=d3", "protocol=stage1",
              "reward.baseline=generic")
     [d3] = group_runs(find_runs([tmp_path / "d3"]))
-    ttfs = build_table([d3], "ttfs", resamples=10)
+    ttfs = build_table([d3], "ttfs")
     row = rows_by(ttfs, "drawer-open")["FuRL ρ=0.05 + D3 λ=80 (b_g)"]
     assert (row["published_tables"], row["published_mean"], row["published_std"],
             row["difference"]) == ("5.2", "271", "29", "0")
     assert "does not state this column's baseline" in table_markdown(ttfs)
+
+
+# --------------------------------------------------------------------------- rliable aggregates
+def hand_scores(label: str, *tasks: list[float]) -> Scores:
+    """Scores of one configuration: one list of run scores per task."""
+    return Scores(label, tuple(f"task{index}" for index in range(len(tasks))),
+                  tuple(np.array(task, dtype=float).reshape(-1, 1) for task in tasks), ())
+
+
+def test_iqm_and_mean_match_a_hand_computation():
+    scores = hand_scores("x", [0.9, 0.1, 0.4, 0.6], [0.2, 1.0, 0.7, 0.3])
+    iqm, mean = aggregate_intervals(scores, reps=300, seed=0)
+    # IQM: the 8 run scores sorted, 0.1 0.2 0.3 0.4 0.6 0.7 0.9 1.0; 25% (2) dropped at each
+    # end; the mean of 0.3 0.4 0.6 0.7.
+    assert iqm.estimate == pytest.approx((0.3 + 0.4 + 0.6 + 0.7) / 4)
+    # Mean: of the task means 0.5 and 0.55.
+    assert mean.estimate == pytest.approx((0.5 + 0.55) / 2)
+    for interval in (iqm, mean):
+        assert 0.1 <= interval.low < interval.estimate < interval.high <= 1.0
+    assert aggregate_intervals(scores, reps=300, seed=0) == (iqm, mean)  # seeded
+    # A task with more runs: the IQM pools runs (5 + 3 scores, 2 dropped at each end).
+    uneven = hand_scores("x", [0.0, 0.5, 0.5, 0.5, 1.0], [0.8, 0.9, 0.2])
+    iqm, mean = aggregate_intervals(uneven, reps=300, seed=0)
+    assert iqm.estimate == pytest.approx((0.5 + 0.5 + 0.5 + 0.8) / 4)
+    assert mean.estimate == pytest.approx((0.5 + (0.8 + 0.9 + 0.2) / 3) / 2)
+
+
+def test_intervals_contain_the_estimate_and_shrink_with_more_seeds():
+    seeds = [0.1, 0.35, 0.6, 0.9]
+    widths = []
+    for copies in (1, 4, 16):  # the same spread of scores, 4, 16 and 64 seeds per task
+        scores = hand_scores("x", seeds * copies, [value / 2 for value in seeds] * copies)
+        for interval in aggregate_intervals(scores, reps=400, seed=1):
+            assert interval.low <= interval.estimate <= interval.high
+        iqm, mean = aggregate_intervals(scores, reps=400, seed=1)
+        widths.append((iqm.high - iqm.low, mean.high - mean.low))
+    assert widths[0][0] > widths[1][0] > widths[2][0]
+    assert widths[0][1] > widths[1][1] > widths[2][1]
+    # One run per task: nothing to resample, the interval is the point.
+    iqm, _ = aggregate_intervals(hand_scores("x", [0.25], [0.75]), reps=200)
+    assert (iqm.low, iqm.estimate, iqm.high) == (0.5, 0.5, 0.5)
+
+
+def test_probability_of_improvement_by_hand():
+    better = hand_scores("x", [0.5, 0.6, 0.7], [0.9, 0.95])
+    worse = hand_scores("y", [0.1, 0.2, 0.45, 0.3], [0.5, 0.8, 0.85])
+    improvement = probability_of_improvement(better, worse, reps=300, seed=0)
+    assert improvement.tasks == ("task0", "task1")
+    assert (improvement.interval.estimate, improvement.interval.low,
+            improvement.interval.high) == (1.0, 1.0, 1.0)  # better on every pair of runs
+    assert probability_of_improvement(worse, better, reps=300).interval.estimate == 0.0
+    # task 0: x 0.2, 0.6 against y 0.4, 0.6: pairs won 0 + (1 + 0.5 tie) = 1.5 of 4;
+    # task 1: x 0.9 against y 0.3, 1.0: 1 of 2. Averaged: (0.375 + 0.5) / 2.
+    mixed = probability_of_improvement(hand_scores("x", [0.2, 0.6], [0.9]),
+                                       hand_scores("y", [0.4, 0.6], [0.3, 1.0]), reps=300)
+    assert mixed.interval.estimate == pytest.approx((1.5 / 4 + 1 / 2) / 2)
+    assert mixed.interval.low <= mixed.interval.estimate <= mixed.interval.high
+    # Only the tasks both have count; none in common is said, not computed.
+    other = Scores("z", ("task1", "task7"), (np.array([[0.0]]), np.array([[1.0]])), ())
+    assert probability_of_improvement(other, worse, reps=50).tasks == ("task1",)
+    apart = probability_of_improvement(Scores("z", ("task7",), (np.array([[1.0]]),), ()),
+                                       worse, reps=50)
+    assert apart.interval is None and "no scored run on y's tasks (task0, task1)" in apart.reason
+
+
+def test_performance_profile_is_the_fraction_of_runs_above_tau():
+    profile = performance_profile(hand_scores("x", [0.2, 0.5, 0.9], [0.45]), reps=300)
+    at = {round(float(tau), 2): index for index, tau in enumerate(profile.taus)}
+    assert profile.fraction[at[0.0]] == 1.0
+    assert profile.fraction[at[0.4]] == pytest.approx(3 / 4)   # 0.45, 0.5, 0.9
+    assert profile.fraction[at[0.5]] == pytest.approx(1 / 4)   # 0.9 (not 0.5 itself)
+    assert profile.fraction[at[0.95]] == 0.0
+    assert np.all(profile.low <= profile.fraction) and np.all(profile.fraction <= profile.high)
+
+
+def test_scores_of_ras_and_of_ttfs_with_censored_runs_at_zero(tmp_path):
+    make_run(tmp_path, "a", SEED0, *FURL, "env.seed=0")            # RAS 100 %, TTFS 151
+    make_run(tmp_path, "b", [False] * 1000, *FURL, "env.seed=1")   # no success in 1,000
+    make_run(tmp_path, "c", [False] * 120, *FURL, "env.seed=2")    # stopped at 120: censored
+    runs = {run.path.name: run for run in find_runs([tmp_path])}
+    assert run_score(runs["a"], "ras").score == pytest.approx(1.0)
+    assert run_score(runs["a"], "ttfs").score == pytest.approx(1 - 151 / 1000)
+    assert run_score(runs["a"], "tt50s").score == pytest.approx(1 - 200 / 1000)
+    assert (run_score(runs["b"], "ttfs").score, run_score(runs["b"], "ttfs").status) == (
+        0.0, "value")
+    assert (run_score(runs["c"], "ttfs").score, run_score(runs["c"], "ttfs").status) == (
+        0.0, CENSORED)
+    assert (run_score(runs["c"], "ras").score, run_score(runs["c"], "ras").status) == (
+        None, INCOMPLETE)
+    [group] = group_runs(list(runs.values()))
+    table = build_reliable_table([group], "ttfs", reps=200)
+    scores = table.scores[group.label]
+    assert (scores.scored, scores.censored, len(scores.unscored)) == (3, 1, 0)
+    # IQM of three scores trims none: their mean.
+    assert table.iqm[group.label].estimate == pytest.approx((1 - 151 / 1000) / 3)
+    markdown = reliable_markdown(table)
+    assert "| FuRL ρ=0.05 | 1 | 3 (1 censored → 0) |" in markdown
+    assert "1 − TTFS / 1000" in markdown and "censored → 0" in markdown
+    ras = build_reliable_table([group], "ras", reps=200)
+    assert ras.scores[group.label].scored == 2 and ras.iqm[group.label].estimate == 0.5
+    assert "3 (" not in reliable_markdown(ras) and "2 (1 incomplete)" in reliable_markdown(ras)
+
+
+def test_reliable_table_over_a_baseline_one_task_and_missing_ones(tmp_path):
+    sac = ("preset=sac", "protocol=stage2")
+    for seed in range(3):  # FuRL reaches its first success before SAC on every run
+        make_run(tmp_path, f"furl{seed}", [False] * (10 + seed) + [True] * 300, *FURL,
+                 f"env.seed={seed}")
+        make_run(tmp_path, f"sac{seed}", [False] * (200 + seed) + [True] * 100, *sac,
+                 f"env.seed={seed}")
+    make_run(tmp_path, "door", [True] * 50, "preset=p2", "protocol=stage2",
+             "env.task=door-open")
+    groups = group_runs(find_runs([tmp_path]))
+    assert [group.label for group in groups] == ["SAC", "FuRL ρ=0.05", "P2 ρ=0.05 (b_g)"]
+    table = build_reliable_table(groups, "ttfs", reps=300, seed=2)
+    assert table.baseline == "SAC" and table.no_baseline is None
+    furl = table.improvements["FuRL ρ=0.05"]
+    assert furl.tasks == ("drawer-open",)  # one task: the stratified bootstrap still works
+    assert (furl.interval.estimate, furl.interval.low, furl.interval.high) == (1.0, 1.0, 1.0)
+    assert table.improvements["P2 ρ=0.05 (b_g)"].interval is None
+    markdown = reliable_markdown(table)
+    assert "| SAC | 1 | 3 | " in markdown and "| baseline |" in markdown
+    assert "| 1.00 [1.00, 1.00] |" in markdown
+    assert "- P2 ρ=0.05 (b_g): no scored run on SAC's tasks (drawer-open)" in markdown
+    rows = {row["configuration"]: row for row in reliable_rows(table)}
+    assert rows["FuRL ρ=0.05"]["p_improvement"] == "1"
+    assert float(rows["SAC"]["iqm"]) == pytest.approx(1 - 202 / 1000)  # 3 runs: their mean
+    # another baseline; and one no configuration has
+    assert build_reliable_table(groups, "ttfs", baseline="FuRL ρ=0.05",
+                                reps=100).improvements["SAC"].interval.estimate == 0.0
+    missing = build_reliable_table(groups[1:], "ttfs", reps=100)
+    assert missing.improvements == {}
+    assert "no configuration is labelled 'SAC'" in missing.no_baseline
+    assert "No probability of improvement: no configuration is labelled 'SAC'" in (
+        reliable_markdown(missing))
+    # RAS: P2's run has 50 of door-open's 400 episodes, so no score and no comparison
+    ras = build_reliable_table(groups, "ras", reps=100)
+    assert ras.scored == ["SAC", "FuRL ρ=0.05"] and list(ras.improvements) == ["FuRL ρ=0.05"]
+    unscored = build_reliable_table(groups, "ras", baseline="P2 ρ=0.05 (b_g)", reps=100)
+    assert unscored.no_baseline == "P2 ρ=0.05 (b_g) has no scored run for RAS (%)"
 
 
 # --------------------------------------------------------------------------- logs
@@ -308,26 +437,19 @@ def test_csv_logs_later_value_of_a_step_wins(tmp_path):
     assert series.steps.tolist() == [1000.0, 2000.0] and series.values.tolist() == [5.0, 4.0]
 
 
-def test_wandb_offline_run_is_read(tmp_path, monkeypatch):
-    from torchrl.record.loggers.wandb import WandbLogger
-
-    monkeypatch.setenv("WANDB_SILENT", "true")
-    logger = WandbLogger("run", offline=True, save_dir=str(tmp_path), project="test")
-    # enough rows that records cross wandb's 32 KiB blocks
-    for step in range(300):
-        logger.log_scalar("sac/loss_qvalue", step / 7, step=1000 * step)
-        logger.log_scalar("train/success", float(step % 2), step=500 * step)
-    logger.experiment.finish()
-    # wandb's service process writes the file; teardown waits for it (finish alone may return
-    # before the last records are flushed on a loaded machine).
-    import wandb
-
-    wandb.teardown()
-    assert sum(path.stat().st_size for path in tmp_path.rglob("*.wandb")) > 32 * 1024
-    scalars = logged_scalars(tmp_path)
-    assert scalars["sac/loss_qvalue"].steps.tolist() == [1000.0 * step for step in range(300)]
-    np.testing.assert_allclose(scalars["sac/loss_qvalue"].values, np.arange(300) / 7)
-    assert scalars["train/success"].values.tolist() == [float(step % 2) for step in range(300)]
+def test_metrics_jsonl_is_read_and_preferred_to_csv_logs(tmp_path):
+    run_dir = make_run(tmp_path, "r", SEED0, *FURL, logged={"sac/loss_qvalue": [(1000, 9.0)]})
+    (run_dir / "metrics.jsonl").write_text(
+        '{"step": 500, "train/success": 0.0}\n'
+        '{"step": 1000, "sac/loss_qvalue": 2.5, "sac/alpha": null, "train/success": 1.0}\n'
+        '{"step": 1500, "sac/loss_qvalue": 2.0}\n'
+        '{"step": 2000, "sac/loss_')  # killed mid-write: skipped
+    scalars = logged_scalars(run_dir)
+    assert sorted(scalars) == ["sac/alpha", "sac/loss_qvalue", "train/success"]
+    assert scalars["sac/loss_qvalue"].steps.tolist() == [1000.0, 1500.0]
+    assert scalars["sac/loss_qvalue"].values.tolist() == [2.5, 2.0]
+    assert scalars["train/success"].values.tolist() == [0.0, 1.0]
+    assert np.isnan(scalars["sac/alpha"].values).all()
 
 
 # --------------------------------------------------------------------------- a real run
@@ -346,6 +468,17 @@ def real_run(tmp_path_factory):
     torch.manual_seed(0)
     sac_temporal.train(cfg)
     return run_dir
+
+
+def test_a_real_run_writes_metrics_jsonl_as_its_csv_logger_sees_them(real_run):
+    """The run's metrics.jsonl against an independent sink of the same calls, TorchRL's
+    CSVLogger: the same keys, steps and values."""
+    from_file, from_csv = logged_scalars(real_run), csv_scalars(real_run)
+    assert (real_run / "metrics.jsonl").is_file() and "sac/loss_qvalue" in from_file
+    assert sorted(from_file) == sorted(from_csv)
+    for key, series in from_csv.items():
+        assert from_file[key].steps.tolist() == series.steps.tolist(), key
+        np.testing.assert_allclose(from_file[key].values, series.values, rtol=1e-6)
 
 
 def test_reward_curves_use_the_saved_heads(real_run):
@@ -401,27 +534,52 @@ def test_report_cli_end_to_end(tmp_path, real_run):
     sweep = tmp_path / "sweep"
     logged = {"sac/loss_qvalue": [(1000, 2.0), (2000, 1.5), (3000, 1.0)]}
     make_run(sweep, "furl/seed0", SEED0, *FURL, "env.seed=0", finished=True, logged=logged)
-    make_run(sweep, "furl/seed1", SEED1, *FURL, "env.seed=1", logged=logged)
+    seed1 = make_run(sweep, "furl/seed1", SEED1, *FURL, "env.seed=1")
+    (seed1 / "metrics.jsonl").write_text("".join(  # a run of today: no CSV logs needed
+        f'{{"step": {step}, "sac/loss_qvalue": {value}}}\n' for step, value in logged[
+            "sac/loss_qvalue"]))
     make_run(sweep, "furl/seed2", [False] * 40, *FURL, "env.seed=2")
     make_run(sweep, "door/seed0", [True] * 400, *FURL, "env.task=door-open", finished=True)
+    make_run(sweep, "sac/seed0", [False] * 300, "preset=sac", "protocol=stage2", finished=True)
     out = tmp_path / "report"
     result = subprocess.run(
         [sys.executable, str(RECIPES / "report.py"), str(sweep), "--out", str(out),
          "--metrics", "sac/loss_qvalue", "--figure-run", str(real_run), "--bootstrap", "300"],
-        capture_output=True, text=True, timeout=120, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert result.returncode == 0, result.stderr
     assert "## Configurations" in result.stdout
-    for name in ("success_curves.png", "metric_sac-loss_qvalue.png", "reward_curves.png"):
+    for name in ("success_curves.png", "metric_sac-loss_qvalue.png", "reward_curves.png",
+                 "aggregate_ras.png", "aggregate_ttfs.png", "aggregate_tt50s.png",
+                 "performance_profiles.png", "probability_of_improvement.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    with (out / "aggregates.csv").open() as file:
+        aggregates = {(row["metric"], row["configuration"]): row
+                      for row in csv.DictReader(file)}
+    # TTFS: SAC never succeeded in 300 episodes (score 0); FuRL's 4 runs all beat it on
+    # drawer-open, the one task SAC has.
+    furl = aggregates["ttfs", "FuRL ρ=0.05"]
+    assert (furl["tasks"], furl["runs_scored"], furl["censored_as_zero"]) == (
+        "drawer-open door-open", "4", "1")
+    assert (furl["p_improvement_tasks"], furl["baseline"]) == ("drawer-open", "SAC")
+    # seeds 0, 1 (scores 0.849, 0.839) beat SAC's 0; seed 2 (censored, 0) ties it: 2.5 / 3
+    assert float(furl["p_improvement"]) == pytest.approx(2.5 / 3)
+    assert float(aggregates["ttfs", "SAC"]["iqm"]) == 0.0
+    assert float(aggregates["ras", "FuRL ρ=0.05"]["mean"]) == pytest.approx(
+        ((1.0 + 70 / 150) / 2 + 1.0) / 2)  # drawer-open's 2 complete runs, door-open's 1
+    report_md = (out / "report.md").read_text()
+    assert "## Over tasks and seeds (rliable)" in report_md
+    assert "(on 1 of its 2 tasks)" in report_md
+    assert "![performance profiles](performance_profiles.png)" in report_md
     with (out / "ras.csv").open() as file:
         rows = {(row["task"], row["configuration"]): row for row in csv.DictReader(file)}
     assert rows["drawer-open", "FuRL ρ=0.05"]["without_value"] == "seed 2: 40/300 episodes"
     assert float(rows["door-open", "FuRL ρ=0.05"]["mean"]) == 100.0
     assert rows["door-open", "FuRL ρ=0.05"]["published_mean"] == "41.5"
     with (out / "runs.csv").open() as file:
-        assert len(list(csv.DictReader(file))) == 4
+        assert len(list(csv.DictReader(file))) == 5
     ttfs = (out / "ttfs.md").read_text()
-    assert markdown_row(ttfs, "drawer-open")[1] == "156 ± 7 (n=2); 1 censored: > 40 ep"
+    assert markdown_row(ttfs, "drawer-open")[1:] == ["1 censored: > 300 ep",
+                                                "156 ± 7 (n=2); 1 censored: > 40 ep"]
     report = (out / "report.md").read_text()
     assert "![running-average success](success_curves.png)" in report
     assert "(reward_curves.png)" in report
@@ -435,4 +593,7 @@ def test_missing_runs_and_metrics_are_named(tmp_path):
     with pytest.raises(SystemExit, match="no run logged it.*logged keys: sac/loss_qvalue"):
         report.main([str(tmp_path / "r"), "--out", str(tmp_path / "out"), "--metrics",
                      "sac/nothing", "--bootstrap", "10"])
+    with pytest.raises(SystemExit, match="--baseline 'PPO': no configuration has that label; "
+                       "the configurations are: 'FuRL ρ=0.05'"):
+        report.main([str(tmp_path / "r"), "--out", str(tmp_path / "out"), "--baseline", "PPO"])
     assert not (tmp_path / "out").exists()  # checked before anything is written

@@ -50,6 +50,44 @@ def test_episode_rows_are_cut_back_to_the_checkpoint(tmp_path):
     assert not list(run.path.glob("*.tmp"))
 
 
+def test_metrics_file_is_json_lines_and_cut_back_to_the_checkpoint(tmp_path):
+    run = RunDirectory(tmp_path / "run")
+    run.create(config={})
+    run.append_metrics(20, {"train/success": 0.0})
+    run.append_metrics(40, {"sac/loss_qvalue": 0.5, "sac/alpha": float("nan")})
+    run.append_metrics(60, {"train/success": 1.0})
+    assert run.metrics_path.read_text().splitlines() == [
+        '{"step": 20, "train/success": 0.0}',
+        '{"step": 40, "sac/loss_qvalue": 0.5, "sac/alpha": null}',
+        '{"step": 60, "train/success": 1.0}']
+    run.truncate_metrics(40)  # resume from a checkpoint at env step 40
+    run.append_metrics(60, {"train/success": 0.0})
+    assert run.metric_points() == [{"step": 20, "train/success": 0.0},
+                                   {"step": 40, "sac/loss_qvalue": 0.5, "sac/alpha": None},
+                                   {"step": 60, "train/success": 0.0}]
+    assert not list(run.path.glob("*.tmp"))
+    with pytest.raises(ValueError, match="clashes"):
+        run.append_metrics(80, {"step": 1.0})
+
+
+def test_metrics_file_skips_a_cut_last_line_and_names_a_bad_one(tmp_path):
+    run = RunDirectory(tmp_path / "run")
+    run.create(config={})
+    run.append_metrics(20, {"train/success": 0.0})
+    with run.metrics_path.open("a") as file:
+        file.write('{"step": 40, "train/succ')  # killed mid-write
+    assert [point["step"] for point in run.metric_points()] == [20]
+    run.truncate_metrics(20)  # the resume drops the cut line
+    assert run.metrics_path.read_text() == '{"step": 20, "train/success": 0.0}\n'
+    for bad, match in (('{"step": 40, "x"\n', "is not JSON"),
+                       ('{"step": "40", "x": 1}\n', 'integer "step"'),
+                       ('{"step": 40, "x": "high"}\n', "numbers")):
+        run.metrics_path.write_text(bad + '{"step": 60}\n')
+        with pytest.raises(ValueError, match=match) as error:
+            run.metric_points()
+        assert "metrics.jsonl:1" in str(error.value)
+
+
 def test_replay_episodes_and_checkpoint_round_trip(tmp_path):
     run = RunDirectory(tmp_path / "run")
     run.create(config={})

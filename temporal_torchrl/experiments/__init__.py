@@ -3,11 +3,14 @@
 - :mod:`~temporal_torchrl.experiments.runs`: find run directories, read them, group them into
   configurations (runs that differ only in the seed).
 - :mod:`~temporal_torchrl.experiments.aggregate`: per-run RAS / TTFS / TT50S (or why a run has
-  none yet), mean, std and bootstrap CIs over seeds, the thesis-layout tables.
+  none yet), mean and std over seeds, the thesis-layout tables.
+- :mod:`~temporal_torchrl.experiments.reliable`: normalised scores and, with rliable, each
+  configuration's IQM and mean over tasks and seeds, probability of improvement over a baseline
+  and performance profiles, with stratified-bootstrap CIs.
 - :mod:`~temporal_torchrl.experiments.published`: the thesis's Tables 5.2-5.12 as data, matched
   to run configurations.
 - :mod:`~temporal_torchrl.experiments.tables`: Markdown and CSV output.
-- :mod:`~temporal_torchrl.experiments.logs`: logged training metrics (CSV logs, offline wandb).
+- :mod:`~temporal_torchrl.experiments.logs`: logged training metrics (the run's metrics.jsonl).
 - :mod:`~temporal_torchrl.experiments.reward_curves`: r_P and r_D along stored episodes with a
   run's saved heads (Figure 5.12).
 - :mod:`~temporal_torchrl.experiments.plots`: the figures (matplotlib; imported on its own).
@@ -20,7 +23,6 @@ from temporal_torchrl.experiments.aggregate import (
     Cell,
     MetricTable,
     RunValue,
-    bootstrap_ci,
     build_table,
     run_value,
 )
@@ -31,28 +33,55 @@ from temporal_torchrl.experiments.published import (
     find_published,
     published_tables,
 )
+from temporal_torchrl.experiments.reliable import (
+    DEFAULT_BASELINE,
+    Improvement,
+    Interval,
+    Profile,
+    ReliableTable,
+    RunScore,
+    Scores,
+    aggregate_intervals,
+    build_reliable_table,
+    configuration_scores,
+    performance_profile,
+    probability_of_improvement,
+    run_score,
+)
 from temporal_torchrl.experiments.reward_curves import EpisodeRewards, reward_curves
 from temporal_torchrl.experiments.runs import Run, RunGroup, find_runs, group_runs, load_run
 
 __all__ = [
+    "DEFAULT_BASELINE",
     "METRICS",
     "Cell",
     "Configuration",
     "EpisodeRewards",
+    "Improvement",
+    "Interval",
     "MetricTable",
+    "Profile",
     "PublishedResult",
+    "ReliableTable",
     "Run",
     "RunGroup",
+    "RunScore",
     "RunValue",
+    "Scores",
     "Series",
-    "bootstrap_ci",
+    "aggregate_intervals",
+    "build_reliable_table",
     "build_table",
+    "configuration_scores",
     "find_published",
     "find_runs",
     "group_runs",
     "load_run",
     "logged_scalars",
+    "performance_profile",
+    "probability_of_improvement",
     "published_tables",
     "reward_curves",
+    "run_score",
     "run_value",
 ]

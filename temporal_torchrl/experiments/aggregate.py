@@ -8,11 +8,11 @@ Each run gives a metric only when it has it (:func:`run_value`):
   (the thesis's horizon) without it scores 1,000, the thesis's convention; a shorter run without
   it is *censored*: its value is only known to exceed its episode count, and it is shown so.
 
-A cell (one configuration on one task) holds the runs' values: the mean, the sample std (n - 1)
-and a 95% percentile-bootstrap confidence interval of the mean, over the runs that have a value;
-runs without one are listed with the cell, never averaged in. The Average row is the mean of the
-task means, as in the thesis, given only when a configuration has complete cells on every task
-of the table.
+A cell (one configuration on one task) holds the runs' values: the mean and the sample std
+(n - 1), as the thesis prints them, over the runs that have a value; runs without one are listed
+with the cell, never averaged in. The Average row is the mean of the task means, as in the
+thesis, given only when a configuration has complete cells on every task of the table. Interval
+estimates are :mod:`~temporal_torchrl.experiments.reliable`'s (rliable), over tasks and seeds.
 """
 
 from __future__ import annotations
@@ -107,41 +107,17 @@ def run_value(run: Run, metric: str, *, window: int = DEFAULT_WINDOW,
     return RunValue(run, float(time_to_successes(run.successes, count, horizon)), VALUE)
 
 
-def bootstrap_ci(samples: Sequence[Sequence[float]], *, resamples: int = 10_000,
-                 seed: int = 0, level: float = 0.95) -> tuple[float, float] | None:
-    """Percentile-bootstrap confidence interval of the mean of the samples' means.
-
-    Each sample (a task's seeds) is resampled with replacement on its own, ``resamples`` times,
-    with ``numpy.random.default_rng(seed)``: the same inputs and seed give the same interval.
-    One sample is the plain CI of its mean; several give the CI of the Average row. None when
-    a sample has fewer than 2 values (no spread to resample).
-    """
-    arrays = [np.asarray(sample, dtype=float) for sample in samples]
-    if not arrays or any(array.size < 2 for array in arrays):
-        return None
-    rng = np.random.default_rng(seed)
-    means = np.zeros(resamples)
-    for array in arrays:
-        picks = rng.integers(0, array.size, size=(resamples, array.size))
-        means += array[picks].mean(axis=1)
-    means /= len(arrays)
-    tail = 100.0 * (1.0 - level) / 2.0
-    low, high = np.percentile(means, [tail, 100.0 - tail])
-    return float(low), float(high)
-
-
 @dataclass(frozen=True)
 class Cell:
     """One configuration on one task: its runs' values and their statistics.
 
-    ``mean``, ``std`` (sample, n - 1) and ``ci`` are over the runs with a value (``std`` None
-    below 2 values, all None without any); ``pending`` lists the runs without one.
+    ``mean`` and ``std`` (sample, n - 1) are over the runs with a value (``std`` None below 2
+    values, both None without any); ``pending`` lists the runs without one.
     """
 
     runs: tuple[RunValue, ...]
     mean: float | None
     std: float | None
-    ci: tuple[float, float] | None
 
     @property
     def values(self) -> list[float]:
@@ -157,23 +133,13 @@ class Cell:
         return bool(self.runs) and not self.pending
 
 
-def make_cell(runs: Sequence[Run], metric: str, *, resamples: int = 10_000,
-              seed: int = 0) -> Cell:
+def make_cell(runs: Sequence[Run], metric: str) -> Cell:
     """The cell of ``runs`` (one configuration, one task) for ``metric``."""
     values = [run_value(run, metric) for run in runs]
     present = [value.value for value in values if value.status == VALUE]
     return Cell(tuple(values),
                 mean=float(np.mean(present)) if present else None,
-                std=float(np.std(present, ddof=1)) if len(present) > 1 else None,
-                ci=bootstrap_ci([present], resamples=resamples, seed=seed))
-
-
-@dataclass(frozen=True)
-class Average:
-    """The Average row of one configuration: mean of its task means, and its bootstrap CI."""
-
-    mean: float
-    ci: tuple[float, float] | None
+                std=float(np.std(present, ddof=1)) if len(present) > 1 else None)
 
 
 @dataclass(frozen=True)
@@ -183,7 +149,8 @@ class MetricTable:
 
     Attributes:
         cells: ``(task, label) -> Cell`` where the configuration has runs on that task.
-        averages: ``label -> Average`` for configurations complete on every task.
+        averages: ``label -> mean of the task means`` for configurations complete on every
+            task.
         published: ``label -> PublishedResult`` for configurations the thesis reports.
     """
 
@@ -191,14 +158,14 @@ class MetricTable:
     tasks: tuple[str, ...]
     groups: tuple[RunGroup, ...]
     cells: dict[tuple[str, str], Cell]
-    averages: dict[str, Average]
+    averages: dict[str, float]
     published: dict[str, PublishedResult]
 
     def best(self, task: str | None) -> set[str]:
         """Labels with the best complete value of a row (``None``: the Average row); values
         are compared as printed, so ties are all best."""
         if task is None:
-            means = {label: average.mean for label, average in self.averages.items()}
+            means = dict(self.averages)
         else:
             means = {group.label: self.cells[task, group.label].mean for group in self.groups
                      if (task, group.label) in self.cells
@@ -210,20 +177,16 @@ class MetricTable:
         return {label for label, mean in rounded.items() if mean == best}
 
 
-def build_table(groups: Sequence[RunGroup], metric: str, *, resamples: int = 10_000,
-                seed: int = 0) -> MetricTable:
+def build_table(groups: Sequence[RunGroup], metric: str) -> MetricTable:
     """The table of ``metric`` over ``groups`` (see module doc)."""
     tasks = tuple(order_tasks(run.task for group in groups for run in group.runs))
     cells, averages, published = {}, {}, {}
     for group in groups:
         for task in group.tasks:
-            cells[task, group.label] = make_cell(group.runs_for(task), metric,
-                                                 resamples=resamples, seed=seed)
+            cells[task, group.label] = make_cell(group.runs_for(task), metric)
         own = [cells.get((task, group.label)) for task in tasks]
         if all(cell is not None and cell.complete for cell in own):
-            averages[group.label] = Average(
-                float(np.mean([cell.mean for cell in own])),
-                bootstrap_ci([cell.values for cell in own], resamples=resamples, seed=seed))
+            averages[group.label] = float(np.mean([cell.mean for cell in own]))
         result = find_published(Configuration.from_settings(group.settings), metric)
         if result is not None:
             published[group.label] = result

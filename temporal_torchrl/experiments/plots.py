@@ -5,12 +5,16 @@
 - :func:`plot_logged_metric`: one logged training metric (``sac/loss_qvalue``, ...) the same way,
   against env steps.
 - :func:`plot_reward_curves`: r_P and r_D along a positive and a negative episode (Figure 5.12).
+- :func:`plot_aggregate_intervals`, :func:`plot_performance_profiles`,
+  :func:`plot_improvement`: the rliable aggregates of
+  :mod:`~temporal_torchrl.experiments.reliable`, drawn with ``rliable.plot_utils``.
 
 Seeds are averaged where all of them have data: up to the shortest run's last episode (or, for
 logged metrics, over the step range all runs share). Past that point the longer runs are drawn
 one by one as thin lines of the same colour, so a run that stopped early never drags a mean down
 or up. Figures are ``matplotlib.figure.Figure`` objects, not pyplot's: nothing opens a window or
-changes the process's backend.
+changes the process's backend; the one exception is ``rliable.plot_utils.plot_interval_estimates``,
+which makes its own pyplot figure, closed once saved.
 """
 
 from __future__ import annotations
@@ -20,11 +24,16 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
+import seaborn
+from matplotlib import pyplot
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from rliable import plot_utils
 
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.experiments.logs import Series
+from temporal_torchrl.experiments.reliable import ReliableTable
 from temporal_torchrl.experiments.reward_curves import EpisodeRewards
 from temporal_torchrl.experiments.runs import Run, RunGroup, order_tasks
 from temporal_torchrl.metrics import DEFAULT_WINDOW
@@ -144,5 +153,126 @@ def plot_reward_curves(positive: EpisodeRewards, negative: EpisodeRewards, path:
         panel.legend(fontsize="small")
     axes[-1, 0].set_xlabel("step t (dotted: first success)")
     figure.suptitle(title)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+
+
+# --------------------------------------------------------------------------- rliable aggregates
+#: rliable joins the two labels of a pair with a separator and splits them again; labels may
+#: hold commas (its default), never a tab.
+_PAIR = "\t"
+
+
+def configuration_colours(labels: Sequence[str]) -> dict[str, tuple[float, float, float]]:
+    """One colour per configuration (seaborn's colourblind palette, rliable's default), the
+    same in every aggregate figure."""
+    return dict(zip(labels, seaborn.color_palette("colorblind", n_colors=len(labels)),
+                    strict=True))
+
+
+def _score_label(table: ReliableTable) -> str:
+    return f"{table.metric.title.split(' ')[0]} score"
+
+
+def plot_aggregate_intervals(table: ReliableTable, path: Path,
+                             colours: Mapping[str, tuple[float, float, float]]) -> None:
+    """IQM and mean of one metric's scores per configuration, 95% CIs as bars, point estimates
+    as ticks (rliable's ``plot_interval_estimates``); the first configuration on top."""
+    labels = table.scored[::-1]
+    if not labels:
+        raise ValueError(f"no configuration has a scored run for {table.metric.title}: "
+                         "nothing to plot.")
+    points = {label: [table.iqm[label].estimate, table.mean[label].estimate] for label in labels}
+    intervals = {label: np.array([[table.iqm[label].low, table.mean[label].low],
+                                  [table.iqm[label].high, table.mean[label].high]])
+                 for label in labels}
+    # rliable sizes the figure by rows (0.37 in each by default): too flat for one or two
+    # configurations to leave room for the titles.
+    row_height = max(0.6, 1.8 / len(labels))
+    figure, axes = plot_utils.plot_interval_estimates(
+        points, intervals, metric_names=["IQM", "Mean"], algorithms=labels,
+        colors=dict(colours), xlabel="", subfigure_width=4.0, row_height=row_height)
+    try:
+        # rliable writes its x label as figure text at a fixed offset, which collides with the
+        # tick labels of a short figure: each panel gets its own instead.
+        for panel in axes:
+            panel.set_xlabel(f"normalised {_score_label(table)}", fontsize="large")
+            low, high = panel.get_xlim()  # scores lie in [0, 1]: no axis far outside
+            panel.set_xlim(max(low, -0.02), min(high, 1.02))
+        height = figure.get_figheight()
+        figure.suptitle(f"{table.metric.title}: 95% stratified-bootstrap CIs",
+                        y=1.0 + 0.55 / height, fontsize="x-large")
+        figure.savefig(path, dpi=120, bbox_inches="tight")
+    finally:
+        pyplot.close(figure)
+
+
+def _note(axes: Axes, text: str) -> None:
+    axes.text(0.5, 0.5, text, ha="center", va="center", wrap=True, transform=axes.transAxes)
+    axes.set_xticks([])
+    axes.set_yticks([])
+
+
+def plot_performance_profiles(tables: Sequence[ReliableTable], path: Path,
+                              colours: Mapping[str, tuple[float, float, float]]) -> None:
+    """One panel per metric: the fraction of runs scoring above tau, with 95% CI bands
+    (rliable's ``plot_performance_profiles``)."""
+    figure = Figure(figsize=(5.5 * len(tables), 4.4))
+    panels = figure.subplots(1, len(tables), squeeze=False)[0]
+    for axes, table in zip(panels, tables, strict=True):
+        axes.set_title(table.metric.title)
+        if not table.scored:
+            _note(axes, "no scored run")
+            continue
+        plot_utils.plot_performance_profiles(
+            {label: table.profiles[label].fraction for label in table.scored},
+            table.profiles[table.scored[0]].taus,
+            performance_profile_cis={label: (table.profiles[label].low,
+                                             table.profiles[label].high)
+                                     for label in table.scored},
+            ax=axes, colors=dict(colours), xlabel=rf"normalised {_score_label(table)} $\tau$",
+            ylabel=r"fraction of runs with score $> \tau$", labelsize="medium",
+            ticklabelsize="medium")
+    # One legend for all panels, below them, where it covers no curve.
+    shown = [label for label in colours if any(label in table.profiles for table in tables)]
+    if shown:
+        handles = [Line2D([], [], color=colours[label], linewidth=2) for label in shown]
+        figure.legend(handles, shown, loc="lower center", ncol=min(3, len(shown)),
+                      fontsize="small", frameon=False)
+    figure.suptitle("Performance profiles (runs pooled over tasks; bands: 95% CIs)")
+    figure.tight_layout(rect=(0, 0.06 * -(-len(shown) // 3), 1, 1))
+    figure.savefig(path, dpi=120)
+
+
+def plot_improvement(tables: Sequence[ReliableTable], path: Path,
+                     colours: Mapping[str, tuple[float, float, float]]) -> None:
+    """One panel per metric: P(X > baseline) of each configuration X with its 95% CI
+    (rliable's ``plot_probability_of_improvement``); configurations without a common task, and
+    metrics without a scored baseline, are left out and named in the panel."""
+    rows = [max(1, sum(each.interval is not None for each in table.improvements.values()))
+            for table in tables]
+    figure = Figure(figsize=(8, sum(0.55 * count + 1.4 for count in rows)))
+    panels = figure.subplots(len(tables), 1, squeeze=False,
+                             gridspec_kw={"height_ratios": rows})[:, 0]
+    for axes, table in zip(panels, tables, strict=True):
+        axes.set_title(table.metric.title, loc="left")
+        # rliable draws the first pair at the bottom: reversed, the report's order reads down.
+        shown = {label: each for label, each in reversed(table.improvements.items())
+                 if each.interval is not None}
+        if not shown:
+            _note(axes, table.no_baseline or "no configuration has a task in common with "
+                  f"{table.baseline}")
+            continue
+        pairs = {f"{label}{_PAIR}{table.baseline}": each for label, each in shown.items()}
+        plot_utils.plot_probability_of_improvement(
+            {pair: each.interval.estimate for pair, each in pairs.items()},
+            {pair: [each.interval.low, each.interval.high] for pair, each in pairs.items()},
+            pair_separator=_PAIR, ax=axes, colors=[colours[label] for label in shown],
+            xticks=[0.0, 0.25, 0.5, 0.75, 1.0], xlabel="", left_ylabel="X",
+            right_ylabel="baseline", ticklabelsize="small", labelsize="medium")
+        axes.set_xlim(-0.02, 1.02)
+        axes.axvline(0.5, color="grey", linestyle="--", linewidth=0.8)
+    panels[-1].set_xlabel("P(X > baseline): a run of X scores more than one of the baseline, "
+                          "same task")
     figure.tight_layout()
     figure.savefig(path, dpi=120)

@@ -1,11 +1,16 @@
-"""Markdown and CSV renderings of :class:`~temporal_torchrl.experiments.aggregate.MetricTable`.
+"""Markdown and CSV renderings of the report's tables.
 
-The Markdown follows the thesis's tables: tasks as rows, configurations as columns, ``mean ±
-std (n=seeds)``, an Average row, the best value of each row in bold (lowest TTFS / TT50S,
-highest RAS; only cells whose runs all have a value compete). Runs without a value are written
-out in their cell (``1 incomplete: 120/300 ep``, ``1 censored: > 85 ep``), never as a number.
-The CSV has one row per cell with the 95% bootstrap confidence interval of the mean and the
-thesis's published value and the difference where the configuration matches.
+:class:`~temporal_torchrl.experiments.aggregate.MetricTable` (:func:`table_markdown`,
+:func:`table_rows`) follows the thesis's tables: tasks as rows, configurations as columns,
+``mean ± std (n=seeds)``, an Average row, the best value of each row in bold (lowest TTFS /
+TT50S, highest RAS; only cells whose runs all have a value compete). Runs without a value are
+written out in their cell (``1 incomplete: 120/300 ep``, ``1 censored: > 85 ep``), never as a
+number. The CSV has one row per cell with the thesis's published value and the difference
+where the configuration matches.
+
+:class:`~temporal_torchrl.experiments.reliable.ReliableTable` (:func:`reliable_markdown`,
+:func:`reliable_rows`): one row per configuration, its IQM and mean of normalised scores over
+tasks and seeds and its probability of improvement over the baseline, each with its 95% CI.
 """
 
 from __future__ import annotations
@@ -25,11 +30,16 @@ from temporal_torchrl.experiments.aggregate import (
     run_value,
 )
 from temporal_torchrl.experiments.published import PUBLISHED_ENCODER, PublishedCell
+from temporal_torchrl.experiments.reliable import Interval, ReliableTable, Scores, score_rule
 from temporal_torchrl.experiments.runs import RunGroup, distinguishing_keys, uses_vlm
 
-CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "ci95_low", "ci95_high",
-               "best", "status", "without_value", "published_tables", "published_mean",
+CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "best", "status",
+               "without_value", "published_tables", "published_mean",
                "published_std", "difference")
+RELIABLE_COLUMNS = ("metric", "configuration", "tasks", "runs_scored", "censored_as_zero",
+                    "unscored", "iqm", "iqm_ci95_low", "iqm_ci95_high", "mean", "mean_ci95_low",
+                    "mean_ci95_high", "baseline", "p_improvement", "p_improvement_ci95_low",
+                    "p_improvement_ci95_high", "p_improvement_tasks", "note")
 RUN_COLUMNS = ("configuration", "task", "seed", "episodes", "finished", *METRICS, "path")
 EMPTY_CELL = "—"
 
@@ -103,7 +113,7 @@ def table_markdown(table: MetricTable) -> str:
     average = []
     for label in labels:
         if label in table.averages:
-            text = _number(table.averages[label].mean, decimals)
+            text = _number(table.averages[label], decimals)
             average.append(f"**{text}**" if label in best else text)
         else:
             average.append(EMPTY_CELL)
@@ -152,7 +162,7 @@ def published_markdown(table: MetricTable) -> str:
             rows.append([group.label, task, cell_text(cell, decimals),
                          _published_text(published, decimals), difference, tables, notes])
         if set(table.tasks) == set(result.cells) and group.label in table.averages:
-            ours = table.averages[group.label].mean
+            ours = table.averages[group.label]
             rows.append([group.label, "Average", _number(ours, decimals),
                          _number(result.average, decimals),
                          _difference(ours, result.average, decimals), tables, notes])
@@ -188,8 +198,6 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
                 "task": task, "configuration": group.label, "runs": str(len(cell.runs)),
                 "n": str(len(cell.values)), "mean": _optional(cell.mean),
                 "std": _optional(cell.std),
-                "ci95_low": _optional(cell.ci[0] if cell.ci else None),
-                "ci95_high": _optional(cell.ci[1] if cell.ci else None),
                 "best": str(group.label in best).lower(), "status": cell_status(cell),
                 "without_value": "; ".join(f"seed {value.run.seed}: {value.describe()}"
                                            for value in cell.pending),
@@ -207,14 +215,12 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
         comparable = result is not None and set(table.tasks) == set(result.cells)
         rows.append({
             "task": "Average", "configuration": group.label, "runs": str(len(group.runs)),
-            "n": "", "mean": _optional(average.mean), "std": "",
-            "ci95_low": _optional(average.ci[0] if average.ci else None),
-            "ci95_high": _optional(average.ci[1] if average.ci else None),
+            "n": "", "mean": _optional(average), "std": "",
             "best": str(group.label in best).lower(), "status": "complete", "without_value": "",
             "published_tables": " ".join(result.tables) if comparable else "",
             "published_mean": _optional(result.average if comparable else None),
             "published_std": "",
-            "difference": _optional(average.mean - result.average) if comparable else ""})
+            "difference": _optional(average - result.average) if comparable else ""})
     return rows
 
 
@@ -253,3 +259,102 @@ def grouping_markdown(groups: Sequence[RunGroup]) -> str:
                     "No key tells them apart.")
     return "\n".join(["## Configurations", "", explanation, "",
                       _markdown_table(["Configuration", "Runs", "Tasks", *keys], rows)]) + "\n"
+
+
+# --------------------------------------------------------------------------- rliable aggregates
+def _interval_text(interval: Interval | None) -> str:
+    if interval is None:
+        return EMPTY_CELL
+    return f"{interval.estimate:.2f} [{interval.low:.2f}, {interval.high:.2f}]"
+
+
+def _runs_text(scores: Scores) -> str:
+    """``4``, ``4 (1 censored → 0)``, ``0 (2 incomplete)``."""
+    notes = []
+    if scores.censored:
+        notes.append(f"{scores.censored} censored → 0")
+    for status in (INCOMPLETE, UNDEFINED):
+        count = sum(run.status == status for run in scores.unscored)
+        if count:
+            notes.append(f"{count} {'without RAS budget' if status == UNDEFINED else status}")
+    return f"{scores.scored}" + (f" ({', '.join(notes)})" if notes else "")
+
+
+def _improvement_text(table: ReliableTable, label: str) -> str:
+    if label == table.baseline:
+        return "baseline"
+    improvement = table.improvements.get(label)
+    if improvement is None:
+        return EMPTY_CELL
+    if improvement.interval is None:
+        return f"{EMPTY_CELL} (no task in common)"
+    text = _interval_text(improvement.interval)
+    own = table.scores[label].tasks
+    if len(improvement.tasks) < len(own):
+        text += f" (on {len(improvement.tasks)} of its {len(own)} tasks)"
+    return text
+
+
+def reliable_markdown(table: ReliableTable) -> str:
+    """One metric's IQM, mean and probability of improvement per configuration, explained."""
+    title = table.metric.title
+    baseline = table.baseline
+    header = ["Configuration", "Tasks", "Runs scored", "IQM [95% CI]", "Mean [95% CI]"]
+    if table.no_baseline is None:
+        header.append(f"P(X > {baseline}) [95% CI]")
+    rows = []
+    for label, scores in table.scores.items():
+        row = [label, str(len(scores.tasks)), _runs_text(scores),
+               _interval_text(table.iqm.get(label)), _interval_text(table.mean.get(label))]
+        if table.no_baseline is None:
+            row.append(_improvement_text(table, label))
+        rows.append(row)
+    rule = score_rule(table.metric.name, table.horizon)
+    parts = [f"### {title}: over tasks and seeds (rliable)", "",
+             _markdown_table(header, rows), "",
+             f"Normalised scores in [0, 1], higher is better: {rule}. IQM: the mean of the "
+             "middle 50% of all the configuration's run scores, tasks pooled; Mean: the mean of "
+             "its task means."]
+    if table.no_baseline is None:
+        parts[-1] += (f" P(X > {baseline}): the probability that a run of X scores more than a "
+                      f"run of {baseline} on the same task (ties count half), averaged over the "
+                      f"tasks both have scores on.")
+    parts[-1] += (f" 95% stratified-bootstrap CIs (runs resampled within each task, "
+                  f"{table.reps} resamples, seed {table.seed}); with one run per task an "
+                  f"interval is its point.")
+    if table.no_baseline is not None:
+        parts += ["", f"No probability of improvement: {table.no_baseline}."]
+    unmatched = [improvement for improvement in table.improvements.values()
+                 if improvement.interval is None]
+    if unmatched:
+        parts += [""] + [f"- {improvement.label}: {improvement.reason}." for improvement in
+                         unmatched]
+    return "\n".join(parts) + "\n"
+
+
+def _interval_fields(prefix: str, interval: Interval | None) -> dict[str, str]:
+    return {prefix: _optional(interval.estimate if interval else None),
+            f"{prefix}_ci95_low": _optional(interval.low if interval else None),
+            f"{prefix}_ci95_high": _optional(interval.high if interval else None)}
+
+
+def reliable_rows(table: ReliableTable) -> list[dict[str, str]]:
+    """The CSV rows of ``table`` (:data:`RELIABLE_COLUMNS`), one per configuration."""
+    rows = []
+    for label, scores in table.scores.items():
+        improvement = table.improvements.get(label)
+        note = (table.no_baseline if table.no_baseline is not None
+                else improvement.reason if improvement is not None else None)
+        rows.append({
+            "metric": table.metric.name, "configuration": label,
+            "tasks": " ".join(scores.tasks),
+            "runs_scored": str(scores.scored), "censored_as_zero": str(scores.censored),
+            "unscored": str(len(scores.unscored)),
+            **_interval_fields("iqm", table.iqm.get(label)),
+            **_interval_fields("mean", table.mean.get(label)),
+            "baseline": table.baseline,
+            **_interval_fields("p_improvement",
+                               improvement.interval if improvement is not None else None),
+            "p_improvement_tasks": " ".join(improvement.tasks) if improvement else "",
+            "note": note or ""})
+    return rows

@@ -43,6 +43,7 @@ from temporal_torchrl.training.config import (
     none_or_name,
     resolve_device,
 )
+from temporal_torchrl.training.metrics import RunLogger
 from temporal_torchrl.training.relay import RelayExploration, RelayPolicy, RelaySchedule
 from temporal_torchrl.training.run import RunDirectory
 from temporal_torchrl.training.trainer import RewardHeadTrainer
@@ -279,7 +280,13 @@ def make_collector(cfg: DictConfig, env: EnvBase, actor: TensorDictModuleBase,
                      auto_register_policy_transforms=False)
 
 
-def make_logger(cfg: DictConfig, run_dir: Path) -> Logger | None:
+def make_logger(cfg: DictConfig, run_dir: Path) -> RunLogger:
+    """The run's ``metrics.jsonl`` and, beside it, the TorchRL logger ``logger.backend`` names
+    (CSVLogger in ``logs/``, WandbLogger in ``wandb/``, or none)."""
+    return RunLogger(RunDirectory(run_dir), _backend_logger(cfg, run_dir))
+
+
+def _backend_logger(cfg: DictConfig, run_dir: Path) -> Logger | None:
     name = cfg.logger.exp_name or run_dir.name
     if cfg.logger.backend == "csv":
         return CSVLogger(name, log_dir=str(run_dir / "logs"))

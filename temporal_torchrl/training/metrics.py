@@ -1,10 +1,15 @@
-"""Training metrics between two log lines: means of update outputs, relabelled-reward statistics."""
+"""Training metrics between two log lines: means of update outputs, relabelled-reward
+statistics, and where they are logged (the run's ``metrics.jsonl`` and a TorchRL logger)."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.record.loggers import Logger
+
+from temporal_torchrl.training.run import RunDirectory
 
 
 class MetricWindow:
@@ -41,7 +46,21 @@ def reward_statistics(next_batch: TensorDictBase) -> TensorDict:
     return TensorDict(stats, [])
 
 
-def log_metrics(logger: Logger | None, metrics: dict[str, float], step: int) -> None:
-    if logger is not None:
+@dataclass(frozen=True)
+class RunLogger:
+    """Where a run's training metrics go: always its ``metrics.jsonl``
+    (:meth:`RunDirectory.append_metrics`), which reports read whatever the backend, and the
+    TorchRL logger ``logger.backend`` names (None for ``none``), a sink for whoever watches
+    the run there."""
+
+    run: RunDirectory
+    backend: Logger | None = None
+
+
+def log_metrics(logger: RunLogger, metrics: dict[str, float], step: int) -> None:
+    """Log one point at env step ``step``: a line of the run's ``metrics.jsonl``, then each
+    value to the TorchRL logger, if any."""
+    logger.run.append_metrics(step, metrics)
+    if logger.backend is not None:
         for key, value in metrics.items():
-            logger.log_scalar(key, value, step=step)
+            logger.backend.log_scalar(key, value, step=step)

@@ -1,21 +1,30 @@
-"""A training run's directory: config, episode rows, replay episodes, checkpoint, summary.
+"""A training run's directory: config, episode rows, metrics, replay episodes, checkpoint, summary.
 
-Layout (every file written whole, through a temporary file and a rename, so a kill never
-leaves one half-written)::
+Layout (files written whole go through a temporary file and a rename; the two logs,
+``episodes.csv`` and ``metrics.jsonl``, are appended a line at a time, so a kill never leaves
+a file half-written except, at worst, the last line of a log)::
 
     <run>/config.json       the resolved config the run started with
     <run>/episodes.csv      one row per finished episode (:data:`EPISODE_COLUMNS`)
+    <run>/metrics.jsonl     one JSON object per logged point of training metrics (below)
     <run>/replay/NNNNNN.pt  the stored rows of every episode inserted into the replay buffer
     <run>/positives/EEEEEE.pt  with train.save_positives: the rows of each successful training
                             episode, whole, by episode number (train.positives_from reads them)
     <run>/checkpoint.pt     networks, optimizers, counters, RNG states (every few episodes)
     <run>/summary.json      TTFS, TT50S, RAS, throughput (when the run has ended)
-    <run>/logs/, wandb/     the logger's files
+    <run>/logs/, wandb/     the files of the TorchRL logger ``logger.backend`` names, if any
+
+``metrics.jsonl`` (:data:`METRICS_FILE`) is written whatever ``logger.backend`` is and is what
+reports read: each line is one JSON object ``{"step": <env steps>, "<key>": <value>, ...}``,
+e.g. ``{"step": 2000, "sac/loss_qvalue": 0.42, "sac/alpha": 0.97}``, keys as the recipe logs
+them, values numbers (``null`` for a non-finite one), steps non-decreasing, each line flushed
+when written. Readers skip a last line without its newline (a kill mid-write).
 
 Guarantees: a run killed at any point resumes from its last checkpoint and loses at most the
-episodes after it (``episodes.csv`` is cut back to the checkpoint; the replay episodes are
-re-inserted in order, so the buffer is rebuilt as it was); an existing run is never replaced
-unless asked (``overwrite``).
+episodes after it (``episodes.csv`` is cut back to the checkpoint, and ``metrics.jsonl`` to its
+env step, so the steps the resumed run logs again are never there twice; the replay episodes
+are re-inserted in order, so the buffer is rebuilt as it was); an existing run is never
+replaced unless asked (``overwrite``).
 
 Example:
     >>> import tempfile
@@ -36,9 +45,10 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import random
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +60,8 @@ EPISODE_COLUMNS = ("episode", "env_steps", "success", "return", "mean_vlm_reward
 CHECKPOINT = "checkpoint.pt"
 REPLAY_DIR = "replay"
 POSITIVES_DIR = "positives"
+#: The run's training metrics, one JSON object per logged point (see the module doc).
+METRICS_FILE = "metrics.jsonl"
 
 
 class RunDirectory:
@@ -122,6 +134,65 @@ class RunDirectory:
             writer.writeheader()
             writer.writerows(rows)
         temporary.replace(self.path / "episodes.csv")
+
+    # ------------------------------------------------------------------ training metrics
+    @property
+    def metrics_path(self) -> Path:
+        return self.path / METRICS_FILE
+
+    def append_metrics(self, step: int, metrics: Mapping[str, float]) -> None:
+        """Append one point, ``{"step": step, **metrics}``, to ``metrics.jsonl``; the line is on
+        disk (flushed, the file closed) when this returns."""
+        if "step" in metrics:
+            raise ValueError(f"a metric named 'step' clashes with {METRICS_FILE}'s step field; "
+                             "log it under another key (e.g. 'train/step').")
+        point = {"step": int(step)}
+        for key, value in metrics.items():
+            value = float(value)
+            point[key] = value if math.isfinite(value) else None  # NaN is not JSON
+        with self.metrics_path.open("a") as file:
+            file.write(json.dumps(point) + "\n")
+
+    def metric_points(self) -> list[dict[str, Any]]:
+        """The points of ``metrics.jsonl`` in the order written (empty when there is none);
+        a last line cut short by a kill is skipped, any other bad line raises."""
+        path = self.metrics_path
+        if not path.exists():
+            return []
+        text = path.read_text()
+        lines = text.split("\n")
+        points = []
+        for number, line in enumerate(lines, start=1):
+            if not line.strip():
+                continue
+            try:
+                point = json.loads(line)
+            except json.JSONDecodeError as error:
+                if number == len(lines):  # no newline after it: the write was cut short
+                    break
+                raise ValueError(f"{path}:{number} is not JSON ({error}); expected one object "
+                                 'per line, {"step": <env steps>, "<key>": <number>, ...}.'
+                                 ) from error
+            if (not isinstance(point, dict) or isinstance(point.get("step"), bool)
+                    or not isinstance(point.get("step"), int)
+                    or not all(value is None or (isinstance(value, int | float)
+                                                 and not isinstance(value, bool))
+                               for value in point.values())):
+                raise ValueError(f"{path}:{number}: {line!r}; expected an object with an "
+                                 'integer "step" and numbers (or null) as values, '
+                                 'e.g. {"step": 2000, "sac/alpha": 0.97}.')
+            points.append(point)
+        return points
+
+    def truncate_metrics(self, step: int) -> None:
+        """Keep the points up to env step ``step`` (those the checkpoint covers) after a kill,
+        so that the steps the resumed run logs again are not there twice."""
+        if not self.metrics_path.exists():
+            return
+        kept = [point for point in self.metric_points() if point["step"] <= step]
+        temporary = self.metrics_path.with_suffix(".tmp")
+        temporary.write_text("".join(json.dumps(point) + "\n" for point in kept))
+        temporary.replace(self.metrics_path)
 
     # ------------------------------------------------------------------ replay
     def save_replay_episode(self, index: int, rows: TensorDictBase) -> None:
