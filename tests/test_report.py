@@ -597,3 +597,48 @@ def test_missing_runs_and_metrics_are_named(tmp_path):
                        "the configurations are: 'FuRL ρ=0.05'"):
         report.main([str(tmp_path / "r"), "--out", str(tmp_path / "out"), "--baseline", "PPO"])
     assert not (tmp_path / "out").exists()  # checked before anything is written
+
+
+@pytest.mark.parametrize("overrides", [
+    ("reward.directional=d3", "reward.certainty_scaling=true"),
+    ("reward.directional=d_sequence", "reward.window=4"),
+])
+def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
+    """report.py --figure-run on runs whose reward has settings beyond the names (a certainty-
+    scaled D3, a d_sequence with a 4-state window): the curves are the trained reward's own
+    forward on the stored episode, the reward built by the recipe's factory."""
+    from temporal_torchrl.encoders import load_encoder
+    from temporal_torchrl.experiments import reward_curves
+    from temporal_torchrl.training import factories
+
+    run_dir = tmp_path / "run"
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        cfg = compose("config", overrides=[
+            "env.max_episode_steps=20", "train.episodes=2", "train.random_steps=10",
+            "encoder.name=state", "+encoder.options.dim=16", "sac.batch_size=16",
+            "sac.hidden_sizes=[32,32]", "reward.batch_size=16", "reward.gap=3",
+            "logger.backend=none", "train.progress=false", "protocol=stage2",
+            "train.preload_positives=1", *overrides, f"output_dir={run_dir}"])
+    sac_temporal.train(cfg)
+    expert, failed = reward_curves(run_dir)
+    trained = factories.make_reward(cfg, load_encoder("state", dim=16))
+    trained.load_state_dict(torch.load(run_dir / "checkpoint.pt", weights_only=True)["reward"])
+    stored = torch.load(run_dir / "replay" / "000000.pt", weights_only=True)
+    embeddings = stored["embedding"].float()
+    steps = torch.arange(len(embeddings))
+    window = embeddings[(steps.unsqueeze(-1) - torch.arange(cfg.reward.window - 1, -1, -1)
+                         ).clamp_min(0)]
+    with torch.no_grad():
+        parts = trained(embeddings, embeddings[:1].expand_as(embeddings),
+                        embeddings[(steps - cfg.reward.k).clamp_min(0)],
+                        torch.zeros(len(embeddings), 1, dtype=torch.bool), window=window)
+    np.testing.assert_allclose(expert.directional, parts["directional_reward"][1:, 0].numpy(),
+                               rtol=1e-5, atol=1e-6)
+    assert failed.kind == FAILED
+    out = tmp_path / "report"
+    result = subprocess.run(
+        [sys.executable, str(RECIPES / "report.py"), str(run_dir), "--out", str(out),
+         "--figure-run", str(run_dir), "--bootstrap", "200"],
+        capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert result.returncode == 0, result.stderr
+    assert (out / "reward_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -24,8 +24,9 @@ import numpy as np
 import torch
 
 from temporal_torchrl.data import NEGATIVE, episode_history
-from temporal_torchrl.experiments.runs import CONFIG_FILE, none_if_none
+from temporal_torchrl.experiments.runs import CONFIG_FILE
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.runs import reward_from_config
 
 CHECKPOINT_FILE = "checkpoint.pt"
 REPLAY_DIR = "replay"
@@ -66,18 +67,13 @@ def load_reward(run_dir: str | Path) -> tuple[TemporalReward, dict]:
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir} has no {CHECKPOINT_FILE}: the reward heads are saved "
                                 "there after each checkpointed episode.")
-    config = json.loads((run_dir / CONFIG_FILE).read_text())["reward"]
+    config = json.loads((run_dir / CONFIG_FILE).read_text())
     checkpoint = torch.load(path, weights_only=True, map_location="cpu")
     state = checkpoint["reward"]
     if not state:
         raise ValueError(f"{run_dir} has no VLM reward (reward.positional and "
                          "reward.directional are none): there are no r_P, r_D to plot.")
-    goal, baseline = state["goal_embedding"], state["baseline_embedding"]
-    reward = TemporalReward(
-        goal.shape[-1], goal, baseline, positional=none_if_none(config["positional"]),
-        directional=none_if_none(config["directional"]), rho=config["rho"],
-        lambda_=config["lambda_"], k=config["k"], alpha=config["alpha"],
-        projection=config["projection"])
+    reward = reward_from_config(config, state["goal_embedding"], state["baseline_embedding"])
     reward.load_state_dict(state)
     return reward.eval(), checkpoint
 

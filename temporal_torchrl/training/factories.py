@@ -38,9 +38,9 @@ from temporal_torchrl.envs import (
     make_temporal_reward,
 )
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.runs import reward_options
 from temporal_torchrl.training.config import (
     check_positives_source,
-    none_or_name,
     resolve_device,
 )
 from temporal_torchrl.training.metrics import RunLogger
@@ -75,14 +75,8 @@ def describe_encoder(cfg: DictConfig, encoder: Encoder | None) -> str:
 def make_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
     """The run's reward on ``train.device``, goal and baseline texts embedded by the encoder's
     text side."""
-    reward = make_temporal_reward(
-        cfg.env.task, encoder, positional=none_or_name(cfg.reward.positional),
-        directional=none_or_name(cfg.reward.directional), baseline=cfg.reward.baseline,
-        rho=cfg.reward.rho, lambda_=cfg.reward.lambda_, k=cfg.reward.k, alpha=cfg.reward.alpha,
-        projection=cfg.reward.projection, window_length=cfg.reward.window,
-        certainty_bandwidth=cfg.reward.certainty_bandwidth,
-        certainty_prior=cfg.reward.certainty_prior,
-        certainty_scaling=cfg.reward.certainty_scaling)
+    reward = make_temporal_reward(cfg.env.task, encoder, baseline=cfg.reward.baseline,
+                                  **reward_options(cfg))
     if cfg.compile.enabled:  # the relabelling (and the env's reward) runs compiled
         reward.compile(mode=cfg.compile.mode)
     return reward.to(resolve_device(cfg.train.device))
