@@ -27,7 +27,9 @@ from typing import Any
 
 import yaml
 
-from temporal_torchrl.experiments.runs import none_if_none, protocol_name, uses_baseline
+from temporal_torchrl.experiments.runs import uses_baseline
+from temporal_torchrl.runs import none_or_name
+from temporal_torchrl.runs.layout import protocol_name
 
 DATA_FILE = Path(__file__).with_name("published_tables.yaml")
 #: The thesis's encoder for every published value.
@@ -65,8 +67,8 @@ class Configuration:
     def from_fields(cls, fields: Mapping[str, Any]) -> Configuration:
         """Build from reward fields (published columns, or a run's settings), dropping what the
         reward does not read so that equal rewards compare equal."""
-        positional = none_if_none(fields.get("positional"))
-        directional = none_if_none(fields.get("directional"))
+        positional = none_or_name(fields.get("positional"))
+        directional = none_or_name(fields.get("directional"))
         vlm = positional is not None or directional is not None
         alpha = positional in ALPHA_POSITIONAL or directional in ALPHA_DIRECTIONAL
         return cls(positional, directional,

@@ -24,12 +24,10 @@ import numpy as np
 import torch
 
 from temporal_torchrl.data import NEGATIVE, episode_history
-from temporal_torchrl.experiments.runs import CONFIG_FILE
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.runs import reward_from_config
+from temporal_torchrl.runs.layout import CHECKPOINT, CONFIG_FILE, REPLAY_DIR, episode_file
 
-CHECKPOINT_FILE = "checkpoint.pt"
-REPLAY_DIR = "replay"
 EXPERT = "expert"
 SUCCESSFUL = "successful training episode"
 FAILED = "failed training episode"
@@ -63,9 +61,9 @@ def load_reward(run_dir: str | Path) -> tuple[TemporalReward, dict]:
     Rewards registered by the run's ``reward.modules`` must be imported first.
     """
     run_dir = Path(run_dir)
-    path = run_dir / CHECKPOINT_FILE
+    path = run_dir / CHECKPOINT
     if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} has no {CHECKPOINT_FILE}: the reward heads are saved "
+        raise FileNotFoundError(f"{run_dir} has no {CHECKPOINT}: the reward heads are saved "
                                 "there after each checkpointed episode.")
     config = json.loads((run_dir / CONFIG_FILE).read_text())
     checkpoint = torch.load(path, weights_only=True, map_location="cpu")
@@ -99,7 +97,7 @@ def episode_rewards(reward: TemporalReward,
 
 def load_episode(run_dir: str | Path, index: int) -> dict[str, torch.Tensor]:
     """The stored rows of the run's ``index``-th inserted episode."""
-    path = Path(run_dir) / REPLAY_DIR / f"{index:06d}.pt"
+    path = Path(run_dir) / REPLAY_DIR / episode_file(index)
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist: no episode {index} in the replay.")
     episode = torch.load(path, weights_only=True)

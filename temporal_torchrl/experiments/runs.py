@@ -26,10 +26,14 @@ from pathlib import Path
 from typing import Any
 
 from temporal_torchrl.envs import EVALUATION_TASKS
-
-CONFIG_FILE = "config.json"
-EPISODES_FILE = "episodes.csv"
-SUMMARY_FILE = "summary.json"
+from temporal_torchrl.runs import has_vlm_reward, none_or_name
+from temporal_torchrl.runs.layout import (
+    CONFIG_FILE,
+    EPISODES_FILE,
+    SUMMARY_FILE,
+    flatten,
+    protocol_name,
+)
 
 #: Config keys about the process that ran a run, not about the run: where it wrote, whether it
 #: resumed, when it stopped, its progress bar and threads, its episode target and checkpoint
@@ -46,36 +50,10 @@ PROCESS_LEAVES = ("runs_dir",)
 #: Keys that tell the runs of one configuration apart, or put them in different table rows.
 RUN_KEYS = ("env.seed", "env.task")
 
-#: Preloaded expert episodes of each protocol of the thesis (section 5.1).
-PROTOCOLS = {0: "stage1", 50: "stage2"}
-
-
-def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """``{"reward": {"rho": 1.0}}`` -> ``{"reward.rho": 1.0}`` (lists stay values)."""
-    flat: dict[str, Any] = {}
-    for key, value in tree.items():
-        name = f"{prefix}.{key}" if prefix else str(key)
-        if isinstance(value, Mapping) and value:
-            flat.update(flatten(value, name))
-        else:
-            flat[name] = value
-    return flat
-
-
 def is_process_key(key: str) -> bool:
     """Whether ``key`` (dotted) is about the process rather than the run (see module doc)."""
     return (key in PROCESS_KEYS or key.startswith(PROCESS_PREFIXES)
             or key.rsplit(".", 1)[-1] in PROCESS_LEAVES)
-
-
-def none_if_none(value: Any) -> str | None:
-    """The recipe's spelling of an absent reward part: ``None`` or the string ``"none"``."""
-    return None if value is None or str(value).lower() == "none" else str(value)
-
-
-def protocol_name(preload_positives: int) -> str:
-    """``stage1`` (no preloaded episodes), ``stage2`` (50), else ``preload<N>``."""
-    return PROTOCOLS.get(preload_positives, f"preload{preload_positives}")
 
 
 @dataclass(frozen=True)
@@ -196,8 +174,8 @@ def configuration_name(settings: Mapping[str, Any], *, encoder: bool = False,
     The baseline is named for the rewards that read it (P1-P4 and the directional ones):
     ``b_g`` generic, ``b_t`` tailored, else the text.
     """
-    positional = none_if_none(settings.get("reward.positional"))
-    directional = none_if_none(settings.get("reward.directional"))
+    positional = none_or_name(settings.get("reward.positional"))
+    directional = none_or_name(settings.get("reward.directional"))
     parts = []
     if positional is None and directional is None:
         parts.append("SAC")
@@ -304,7 +282,8 @@ def group_runs(runs: Sequence[Run]) -> list[RunGroup]:
         by_settings.setdefault(_frozen(configuration_settings(run)), []).append(run)
     settings = [configuration_settings(members[0]) for members in by_settings.values()]
     # SAC reads no embedding, so its encoder.name says nothing about it.
-    several_encoders = len({each.get("encoder.name") for each in settings if uses_vlm(each)}) > 1
+    several_encoders = len({each.get("encoder.name") for each in settings if has_vlm_reward(
+        each.get("reward.positional"), each.get("reward.directional"))}) > 1
     several_protocols = len({each.get("train.preload_positives") for each in settings}) > 1
     labels = [configuration_name(each, encoder=several_encoders, protocol=several_protocols)
               for each in settings]
@@ -333,15 +312,9 @@ def group_runs(runs: Sequence[Run]) -> list[RunGroup]:
 def _thesis_order(group: RunGroup) -> tuple:
     """SAC first, then by positional and directional reward, rho, lambda, as the thesis."""
     settings = group.settings
-    positional = none_if_none(settings.get("reward.positional")) or ""
-    directional = none_if_none(settings.get("reward.directional")) or ""
-    vlm = uses_vlm(settings)
+    positional = none_or_name(settings.get("reward.positional")) or ""
+    directional = none_or_name(settings.get("reward.directional")) or ""
+    vlm = has_vlm_reward(settings.get("reward.positional"), settings.get("reward.directional"))
     return (vlm, positional != "furl", positional, directional,
             settings.get("reward.rho", 0) if vlm else 0,
             settings.get("reward.lambda_", 0) if directional else 0, group.label)
-
-
-def uses_vlm(settings: Mapping[str, Any]) -> bool:
-    """Whether the configuration has a VLM reward (positional or directional)."""
-    return (none_if_none(settings.get("reward.positional")) is not None
-            or none_if_none(settings.get("reward.directional")) is not None)

@@ -31,7 +31,8 @@ from temporal_torchrl.experiments.aggregate import (
 )
 from temporal_torchrl.experiments.published import PUBLISHED_ENCODER, PublishedCell
 from temporal_torchrl.experiments.reliable import Interval, ReliableTable, Scores, score_rule
-from temporal_torchrl.experiments.runs import RunGroup, distinguishing_keys, uses_vlm
+from temporal_torchrl.experiments.runs import RunGroup, distinguishing_keys
+from temporal_torchrl.runs import has_vlm_reward
 
 CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "best", "status",
                "without_value", "published_tables", "published_mean",
@@ -132,7 +133,8 @@ def table_markdown(table: MetricTable) -> str:
 def _notes(table: MetricTable, group: RunGroup) -> str:
     notes = []
     encoder = group.settings.get("encoder.name")
-    if uses_vlm(group.settings) and encoder != PUBLISHED_ENCODER:
+    if has_vlm_reward(group.settings.get("reward.positional"),
+                      group.settings.get("reward.directional")) and encoder != PUBLISHED_ENCODER:
         notes.append(f"encoder {encoder} (thesis: {PUBLISHED_ENCODER})")
     if table.published[group.label].baseline_unstated:
         notes.append("the thesis does not state this column's baseline")
