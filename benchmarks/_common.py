@@ -8,30 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-import torch
-
-
-def machine_description() -> str:
-    """CPU model, core count, torch threads and GPU (if any), as one line."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    parts = [cpu, f"{os.cpu_count()} cores", f"torch {torch.__version__}",
-             f"{torch.get_num_threads()} torch threads"]
-    if torch.cuda.is_available():
-        parts.append(f"GPU {torch.cuda.get_device_name(0)}")
-    return ", ".join(parts)
+from temporal_torchrl.machine import machine_description
 
 
 def rate(fn: Callable[[], object], items_per_call: int, min_seconds: float = 2.0,

@@ -27,8 +27,6 @@ with several tasks also ``<output_dir>/summary.md`` and ``summary.json``.
 from __future__ import annotations
 
 import dataclasses
-import os
-import platform
 import time
 from pathlib import Path
 from typing import Any
@@ -55,6 +53,7 @@ from temporal_torchrl.evaluation import (
     success_length,
     variant_reward,
 )
+from temporal_torchrl.machine import machine_description
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
 from temporal_torchrl.training import factories
 from temporal_torchrl.training.config import import_reward_modules, resolve_device
@@ -183,20 +182,6 @@ def task_config(cfg: DictConfig, task: str) -> DictConfig:
     single = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
     single.env.task = task
     return single
-
-
-def machine_description() -> str:
-    """The CPU model, core count, GPU if any, and torch's version and threads."""
-    model = platform.processor() or platform.machine()
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        for line in cpuinfo.read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    gpu = f", GPU {torch.cuda.get_device_name(0)}" if torch.cuda.is_available() else ", no GPU"
-    return (f"{model}, {os.cpu_count()} CPU cores{gpu}; torch {torch.__version__}, "
-            f"{torch.get_num_threads()} torch threads")
 
 
 def dataset_spec(cfg: DictConfig) -> DatasetSpec:

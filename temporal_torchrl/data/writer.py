@@ -38,11 +38,10 @@ class EpisodeWriter(Writer):
         super().register_storage(storage)
         self._valid = torch.zeros(storage.max_size, dtype=torch.bool)
 
-    def _empty(self, empty_write_count: bool = True) -> None:
+    def _empty(self, empty_write_count: bool = True) -> None:  # TorchRL's signature
         self._cursor = 0
         self._permanent_rows = 0
         self._next_episode = 0
-        self._write_count = 0
         # episode id -> (first row, number of rows); only episodes still readable are kept.
         self.episodes: dict[int, tuple[int, int]] = {}
         self._keys: set[str] | None = None
@@ -94,7 +93,6 @@ class EpisodeWriter(Writer):
         self.episodes[episode_id] = (start, length)
         self._next_episode += 1
         self._cursor = start + length
-        self._write_count += length
         if permanent:
             self._permanent_rows = self._cursor
         self.version += 1
@@ -140,7 +138,7 @@ class EpisodeWriter(Writer):
     def state_dict(self) -> dict[str, Any]:
         first = torch.tensor([first for first, _ in self.episodes.values()], dtype=torch.int64)
         return {"cursor": self._cursor, "permanent_rows": self._permanent_rows,
-                "next_episode": self._next_episode, "write_count": self._write_count,
+                "next_episode": self._next_episode,
                 "valid": self._valid.clone(),
                 "episode_ids": torch.tensor(list(self.episodes), dtype=torch.int64),
                 "episode_first": first,
@@ -152,7 +150,6 @@ class EpisodeWriter(Writer):
         self._cursor = state_dict["cursor"]
         self._permanent_rows = state_dict["permanent_rows"]
         self._next_episode = state_dict["next_episode"]
-        self._write_count = state_dict["write_count"]
         self._valid = state_dict["valid"].clone()
         self.episodes = {int(i): (int(f), int(n)) for i, f, n in zip(
             state_dict["episode_ids"], state_dict["episode_first"],

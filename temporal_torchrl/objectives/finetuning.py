@@ -1,12 +1,13 @@
 """Reward-finetuning losses for the positional (FuRL) and directional reward heads.
 
 All are TorchRL :class:`~torchrl.objectives.LossModule` s that read one batch from
-:meth:`temporal_torchrl.data.EpisodeReplayBuffer.sample_finetuning`:
+``EpisodeReplayBuffer.finetuning.sample()`` (:class:`~temporal_torchrl.data.FinetuningSampler`
+and :class:`~temporal_torchrl.data.FinetuningLayout`):
 
 - ``"negative"``: states of failed episodes (``embedding`` s_t, ``initial_embedding`` s_0,
   ``previous_embedding`` s_{t-k}, and ``embedding_window`` s_{t-K+1} .. s_t for a reward that
   reads a window);
-- ``"positive"`` (stage 2 only): positive states of successful episodes;
+- ``"positive"`` (stage 2 only): valid positive states of successful episodes (step > gap);
 - ``"positive_pair"`` (stage 2, when a positive run is longer than the gap): ``"later"`` s_i and
   ``"earlier"`` s_{i-gap} from one positive episode.
 
