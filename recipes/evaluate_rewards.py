@@ -40,20 +40,20 @@ from tensordict import TensorDict
 from temporal_torchrl.data import EpisodeReplayBuffer, goal_image_embedding
 from temporal_torchrl.encoders import ENCODERS, Encoder
 from temporal_torchrl.envs import TASKS, baseline_text, get_task
-from temporal_torchrl.evaluation import (
+from temporal_torchrl.machine import machine_description
+from temporal_torchrl.reward_quality import (
     DatasetSpec,
     RewardDataset,
     finetune_reward,
     load_or_collect,
     make_finetuning_buffer,
-    report,
+    outputs,
     reward_curve,
     score_reward,
     split_by_episode,
     success_length,
     variant_reward,
 )
-from temporal_torchrl.machine import machine_description
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
 from temporal_torchrl.training import factories
 from temporal_torchrl.training.config import import_reward_modules, resolve_device
@@ -235,7 +235,7 @@ def prepare_task(cfg: DictConfig, encoder: Encoder) -> TaskData:
 
 def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
     """Collect or load the task's dataset, then score every variant; returns the result dict
-    (:mod:`temporal_torchrl.evaluation.report`) and writes it under ``output_dir/<task>``."""
+    (:mod:`temporal_torchrl.reward_quality.outputs`) and writes it under ``output_dir/<task>``."""
     start = time.perf_counter()
     task = get_task(cfg.env.task)
     data = prepare_task(cfg, encoder)
@@ -295,7 +295,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
         if cfg.figures:
             # The trained (or zero-shot) curve first, solid; the untrained one dashed.
             order = list(reversed(states))
-            report.plot_reward_curves(
+            outputs.plot_reward_curves(
                 output / "figures" / f"{variant}.png",
                 f"{task.name}: {variant} ({scores.kind}, {order[0]}), {encoder.name}, "
                 "held-out episodes",
@@ -304,7 +304,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
                 success_step=success_length(figure_successful),
                 ylabel=f"r_{'P' if scores.kind == 'positional' else 'D'}")
         print(f"  {task.name} {variant}: " + "; ".join(
-            f"{row['heads']} {report.metric_text(row)}" for row in rows
+            f"{row['heads']} {outputs.metric_text(row)}" for row in rows
             if row["variant"] == variant) + f" ({rows[-1]['seconds']:.0f} s)", flush=True)
 
     result = {
@@ -331,8 +331,8 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
         "rows": rows,
     }
     output.mkdir(parents=True, exist_ok=True)
-    report.write_json(output / "results.json", result)
-    (output / "results.md").write_text(report.results_markdown(result))
+    outputs.write_json(output / "results.json", result)
+    (output / "results.md").write_text(outputs.results_markdown(result))
     return result
 
 
@@ -356,8 +356,8 @@ def evaluate(cfg: DictConfig, command: str | None = None) -> list[dict]:
               f"{Path(cfg.output_dir) / task / 'results.md'}", flush=True)
     if len(results) > 1:
         output = Path(cfg.output_dir)
-        report.write_json(output / "summary.json", {"tasks": results})
-        (output / "summary.md").write_text(report.summary_markdown(results))
+        outputs.write_json(output / "summary.json", {"tasks": results})
+        (output / "summary.md").write_text(outputs.summary_markdown(results))
         print(f"summary -> {output / 'summary.md'}", flush=True)
     return results
 

@@ -15,7 +15,7 @@ and writes into ``--out``:
 - ``aggregates.md``/``.csv``: per metric and configuration, over all its tasks and seeds, the
   IQM and mean of normalised scores and the probability of improvement over ``--baseline``
   (default SAC), each with a 95% stratified-bootstrap CI, computed with rliable
-  (:mod:`temporal_torchrl.experiments.reliable`; scores: RAS / 100, and 1 - TTFS / 1000 with
+  (:mod:`temporal_torchrl.reports.reliable`; scores: RAS / 100, and 1 - TTFS / 1000 with
   runs that have not reached the success scored 0);
 - ``aggregate_<metric>.png`` (IQM and mean with their CIs), ``performance_profiles.png``
   (fraction of runs above each score, with CI bands) and ``probability_of_improvement.png``,
@@ -36,7 +36,7 @@ import json
 import re
 from pathlib import Path
 
-from temporal_torchrl.experiments import (
+from temporal_torchrl.reports import (
     DEFAULT_BASELINE,
     METRICS,
     build_reliable_table,
@@ -47,7 +47,8 @@ from temporal_torchrl.experiments import (
     logged_scalars,
     reward_curves,
 )
-from temporal_torchrl.experiments.plots import (
+from temporal_torchrl.reports.groups import configuration_name, configuration_settings
+from temporal_torchrl.reports.plots import (
     configuration_colours,
     plot_aggregate_intervals,
     plot_improvement,
@@ -56,8 +57,7 @@ from temporal_torchrl.experiments.plots import (
     plot_reward_curves,
     plot_success_curves,
 )
-from temporal_torchrl.experiments.runs import configuration_name, configuration_settings
-from temporal_torchrl.experiments.tables import (
+from temporal_torchrl.reports.tables import (
     CSV_COLUMNS,
     RELIABLE_COLUMNS,
     RUN_COLUMNS,

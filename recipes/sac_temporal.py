@@ -37,7 +37,7 @@ from tqdm import tqdm
 
 from temporal_torchrl.data import episode_rows
 from temporal_torchrl.envs import get_task
-from temporal_torchrl.metrics import DEFAULT_HORIZON, episode_success, ras, tt50s, ttfs
+from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, episode_success, ras, tt50s, ttfs
 from temporal_torchrl.training import (
     MetricWindow,
     RunDirectory,

@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from temporal_torchrl.metrics import episode_success, ras, time_to_successes, tt50s, ttfs
+from temporal_torchrl.protocol_metrics import episode_success, ras, time_to_successes, tt50s, ttfs
 
 
 def test_ttfs_is_one_based_and_capped():

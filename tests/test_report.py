@@ -1,4 +1,4 @@
-"""Reports over runs (temporal_torchrl.experiments, recipes/report.py) on hand-made run
+"""Reports over runs (temporal_torchrl.reports, recipes/report.py) on hand-made run
 directories with known success sequences, and one tiny real run for the reward curves."""
 
 import csv
@@ -20,7 +20,7 @@ from omegaconf import OmegaConf
 
 from temporal_torchrl.data import NEGATIVE
 from temporal_torchrl.envs import EVALUATION_TASKS, get_task
-from temporal_torchrl.experiments import (
+from temporal_torchrl.reports import (
     Configuration,
     build_table,
     find_published,
@@ -31,9 +31,10 @@ from temporal_torchrl.experiments import (
     reward_curves,
     run_value,
 )
-from temporal_torchrl.experiments.aggregate import CENSORED, INCOMPLETE
-from temporal_torchrl.experiments.logs import csv_scalars
-from temporal_torchrl.experiments.reliable import (
+from temporal_torchrl.reports.aggregate import CENSORED, INCOMPLETE
+from temporal_torchrl.reports.groups import distinguishing_keys
+from temporal_torchrl.reports.logs import csv_scalars
+from temporal_torchrl.reports.reliable import (
     Scores,
     aggregate_intervals,
     build_reliable_table,
@@ -41,9 +42,8 @@ from temporal_torchrl.experiments.reliable import (
     probability_of_improvement,
     run_score,
 )
-from temporal_torchrl.experiments.reward_curves import EXPERT, FAILED
-from temporal_torchrl.experiments.runs import distinguishing_keys
-from temporal_torchrl.experiments.tables import (
+from temporal_torchrl.reports.reward_curves import EXPERT, FAILED
+from temporal_torchrl.reports.tables import (
     grouping_markdown,
     reliable_markdown,
     reliable_rows,
@@ -513,7 +513,7 @@ def test_reward_curves_use_the_saved_heads(real_run):
 def test_reward_curves_give_a_sequence_reward_its_window():
     """d_sequence reads the last K embeddings: the curve's value at state t is the reward of the
     window s_{t-K+1} .. s_t padded with s_0 before the episode start, as the env gives it."""
-    from temporal_torchrl.experiments.reward_curves import episode_rewards
+    from temporal_torchrl.reports.reward_curves import episode_rewards
 
     torch.manual_seed(0)
     dim, length = 6, 4
@@ -608,7 +608,7 @@ def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
     scaled D3, a d_sequence with a 4-state window): the curves are the trained reward's own
     forward on the stored episode, the reward built by the recipe's factory."""
     from temporal_torchrl.encoders import load_encoder
-    from temporal_torchrl.experiments import reward_curves
+    from temporal_torchrl.reports import reward_curves
     from temporal_torchrl.training import factories
 
     run_dir = tmp_path / "run"

@@ -11,7 +11,7 @@ from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 
 from temporal_torchrl.encoders import load_encoder
-from temporal_torchrl.evaluation import (
+from temporal_torchrl.reward_quality import (
     DatasetSpec,
     auroc,
     direction_accuracy,
@@ -24,7 +24,7 @@ from temporal_torchrl.evaluation import (
     value_order_correlation,
     variant_reward,
 )
-from temporal_torchrl.evaluation import dataset as dataset_module
+from temporal_torchrl.reward_quality import dataset as dataset_module
 from temporal_torchrl.rewards import register_reward, unregister_reward
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"

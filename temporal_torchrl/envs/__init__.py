@@ -1,8 +1,14 @@
 """Fixed-goal Metaworld tasks as TorchRL envs, the task registry, scripted experts, and the
 canonical temporal env composition."""
 
-from temporal_torchrl.envs.experts import collect_expert_episodes, first_success_index
+from temporal_torchrl.envs.experts import (
+    EXPERT_MAX_STEPS,
+    collect_expert_episodes,
+    collect_successful_experts,
+    first_success_index,
+)
 from temporal_torchrl.envs.metaworld_env import MetaworldEnv, make_env
+from temporal_torchrl.envs.task_reward import baseline_text, make_temporal_reward
 from temporal_torchrl.envs.tasks import (
     EVALUATION_TASKS,
     GENERIC_BASELINE,
@@ -10,13 +16,7 @@ from temporal_torchrl.envs.tasks import (
     TaskSpec,
     get_task,
 )
-from temporal_torchrl.envs.temporal import (
-    EXPERT_MAX_STEPS,
-    baseline_text,
-    collect_successful_experts,
-    make_temporal_env,
-    make_temporal_reward,
-)
+from temporal_torchrl.envs.temporal import make_temporal_env
 
 __all__ = [
     "EVALUATION_TASKS",

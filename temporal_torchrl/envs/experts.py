@@ -125,3 +125,34 @@ def first_success_index(episode: TensorDict) -> int:
             "(episode['next', 'success'].any()) before asking for the first success."
         )
     return int(success.nonzero()[0, 0])
+
+
+#: Steps a scripted expert is given to succeed (the protocol's episode length).
+EXPERT_MAX_STEPS = 500
+
+
+def collect_successful_experts(task: str, seed: int, count: int, *, render: bool = False,
+                               image_size: int = 224, camera: str = "corner2",
+                               fast_render: bool = True,
+                               max_episode_steps: int = EXPERT_MAX_STEPS,
+                               steps_after_success: int | None = 5,
+                               max_attempts: int = 5) -> list[TensorDict]:
+    """``count`` successful scripted-expert episodes of the task's layout ``seed``.
+
+    Episodes are cut ``steps_after_success`` steps after their first success (None: whole
+    episodes). Noisy episodes that fail are replaced (new noise seeds), up to ``max_attempts``
+    rounds; frames are rendered when ``render`` (pass the training run's render settings),
+    nothing is embedded here.
+    """
+    episodes: list[TensorDict] = []
+    for attempt in range(max_attempts):
+        batch = collect_expert_episodes(
+            task, seed, num_episodes=count - len(episodes), render=render,
+            image_size=image_size, camera=camera, fast_render=fast_render,
+            max_episode_steps=max_episode_steps, steps_after_success=steps_after_success,
+            generator_seed=None if attempt == 0 else seed + 1000 * attempt)
+        episodes += [episode for episode in batch if bool(episode["next", "success"].any())]
+        if len(episodes) == count:
+            return episodes
+    raise RuntimeError(f"the scripted expert of {task} succeeded in only {len(episodes)} of the "
+                       f"{count} episodes asked for in {max_attempts} rounds.")

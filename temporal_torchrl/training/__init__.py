@@ -1,6 +1,6 @@
 """The training engine: reward-head trainer, run directory, recipe config, training metrics."""
 
-from temporal_torchrl.training.metrics import (
+from temporal_torchrl.training.logger import (
     MetricWindow,
     RunLogger,
     log_metrics,

@@ -43,7 +43,7 @@ from temporal_torchrl.training.config import (
     check_positives_source,
     resolve_device,
 )
-from temporal_torchrl.training.metrics import RunLogger
+from temporal_torchrl.training.logger import RunLogger
 from temporal_torchrl.training.relay import RelayExploration, RelayPolicy, RelaySchedule
 from temporal_torchrl.training.run import RunDirectory
 from temporal_torchrl.training.trainer import RewardHeadTrainer

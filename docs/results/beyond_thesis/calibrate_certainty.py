@@ -32,7 +32,7 @@ sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
 
-from temporal_torchrl.evaluation import (  # noqa: E402
+from temporal_torchrl.reward_quality import (  # noqa: E402
     make_finetuning_buffer,
 )
 from temporal_torchrl.rewards import direction_certainty, reference_scales  # noqa: E402

@@ -34,7 +34,7 @@ sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
 
-from temporal_torchrl.evaluation import (  # noqa: E402
+from temporal_torchrl.reward_quality import (  # noqa: E402
     auroc,
     direction_accuracy,
     episode_embeddings,

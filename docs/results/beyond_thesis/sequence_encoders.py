@@ -32,13 +32,13 @@ sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
 
-from temporal_torchrl.evaluation import (  # noqa: E402
+from temporal_torchrl.objectives import finetuning_losses  # noqa: E402
+from temporal_torchrl.reward_quality import (  # noqa: E402
     finetune_reward,
     make_finetuning_buffer,
     score_reward,
     variant_reward,
 )
-from temporal_torchrl.objectives import finetuning_losses  # noqa: E402
 from temporal_torchrl.rewards import TemporalReward  # noqa: E402
 from temporal_torchrl.training import factories  # noqa: E402
 

@@ -1,24 +1,24 @@
 """Reports over runs of ``recipes/sac_temporal.py``: the thesis's tables and figures.
 
-- :mod:`~temporal_torchrl.experiments.runs`: find run directories, read them, group them into
+- :mod:`~temporal_torchrl.reports.groups`: find run directories, read them, group them into
   configurations (runs that differ only in the seed).
-- :mod:`~temporal_torchrl.experiments.aggregate`: per-run RAS / TTFS / TT50S (or why a run has
+- :mod:`~temporal_torchrl.reports.aggregate`: per-run RAS / TTFS / TT50S (or why a run has
   none yet), mean and std over seeds, the thesis-layout tables.
-- :mod:`~temporal_torchrl.experiments.reliable`: normalised scores and, with rliable, each
+- :mod:`~temporal_torchrl.reports.reliable`: normalised scores and, with rliable, each
   configuration's IQM and mean over tasks and seeds, probability of improvement over a baseline
   and performance profiles, with stratified-bootstrap CIs.
-- :mod:`~temporal_torchrl.experiments.published`: the thesis's Tables 5.2-5.12 as data, matched
+- :mod:`~temporal_torchrl.reports.published`: the thesis's Tables 5.2-5.12 as data, matched
   to run configurations.
-- :mod:`~temporal_torchrl.experiments.tables`: Markdown and CSV output.
-- :mod:`~temporal_torchrl.experiments.logs`: logged training metrics (the run's metrics.jsonl).
-- :mod:`~temporal_torchrl.experiments.reward_curves`: r_P and r_D along stored episodes with a
+- :mod:`~temporal_torchrl.reports.tables`: Markdown and CSV output.
+- :mod:`~temporal_torchrl.reports.logs`: logged training metrics (the run's metrics.jsonl).
+- :mod:`~temporal_torchrl.reports.reward_curves`: r_P and r_D along stored episodes with a
   run's saved heads (Figure 5.12).
-- :mod:`~temporal_torchrl.experiments.plots`: the figures (matplotlib; imported on its own).
+- :mod:`~temporal_torchrl.reports.plots`: the figures (matplotlib; imported on its own).
 
 ``recipes/report.py`` puts them together.
 """
 
-from temporal_torchrl.experiments.aggregate import (
+from temporal_torchrl.reports.aggregate import (
     METRICS,
     Cell,
     MetricTable,
@@ -26,14 +26,15 @@ from temporal_torchrl.experiments.aggregate import (
     build_table,
     run_value,
 )
-from temporal_torchrl.experiments.logs import Series, logged_scalars
-from temporal_torchrl.experiments.published import (
+from temporal_torchrl.reports.groups import Run, RunGroup, find_runs, group_runs, load_run
+from temporal_torchrl.reports.logs import Series, logged_scalars
+from temporal_torchrl.reports.published import (
     Configuration,
     PublishedResult,
     find_published,
     published_tables,
 )
-from temporal_torchrl.experiments.reliable import (
+from temporal_torchrl.reports.reliable import (
     DEFAULT_BASELINE,
     Improvement,
     Interval,
@@ -48,8 +49,7 @@ from temporal_torchrl.experiments.reliable import (
     probability_of_improvement,
     run_score,
 )
-from temporal_torchrl.experiments.reward_curves import EpisodeRewards, reward_curves
-from temporal_torchrl.experiments.runs import Run, RunGroup, find_runs, group_runs, load_run
+from temporal_torchrl.reports.reward_curves import EpisodeRewards, reward_curves
 
 __all__ = [
     "DEFAULT_BASELINE",

@@ -49,15 +49,15 @@ from dataclasses import dataclass
 import numpy as np
 from rliable import library, metrics
 
-from temporal_torchrl.experiments.aggregate import (
+from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON
+from temporal_torchrl.reports.aggregate import (
     CENSORED,
     METRICS,
     VALUE,
     Metric,
     run_value,
 )
-from temporal_torchrl.experiments.runs import Run, RunGroup
-from temporal_torchrl.metrics import DEFAULT_HORIZON
+from temporal_torchrl.reports.groups import Run, RunGroup
 
 #: The default baseline of the probability of improvement (``--baseline``).
 DEFAULT_BASELINE = "SAC"

@@ -1,13 +1,13 @@
 """Offline reward-quality benchmark: score reward variants and encoders without RL.
 
 Collect embedded successful and failed episodes of a task (:mod:`.dataset`), finetune a reward's
-heads on the training part with the package's own losses (:mod:`.finetuning`), and score the
+heads on the training part with the package's own losses (:mod:`.offline_finetuning`), and score the
 rewards on the held-out part (:mod:`.scoring`, :mod:`.metrics`): value-order correlation, AUROC
-and direction accuracy. :mod:`.report` writes the tables, JSON and figures;
+and direction accuracy. :mod:`.outputs` writes the tables, JSON and figures;
 ``recipes/evaluate_rewards.py`` runs the whole benchmark.
 """
 
-from temporal_torchrl.evaluation.dataset import (
+from temporal_torchrl.reward_quality.dataset import (
     EPISODE_KINDS,
     DatasetSpec,
     RewardDataset,
@@ -15,19 +15,19 @@ from temporal_torchrl.evaluation.dataset import (
     load_or_collect,
     split_by_episode,
 )
-from temporal_torchrl.evaluation.finetuning import (
-    STAGES,
-    finetune_reward,
-    make_finetuning_buffer,
-)
-from temporal_torchrl.evaluation.metrics import (
+from temporal_torchrl.reward_quality.metrics import (
     auroc,
     average_ranks,
     direction_accuracy,
     spearman_correlation,
     value_order_correlation,
 )
-from temporal_torchrl.evaluation.scoring import (
+from temporal_torchrl.reward_quality.offline_finetuning import (
+    STAGES,
+    finetune_reward,
+    make_finetuning_buffer,
+)
+from temporal_torchrl.reward_quality.scoring import (
     RewardScores,
     backward_rewards,
     episode_embeddings,

@@ -9,7 +9,7 @@ reward), baseline (for the rewards that read it; "unstated" in the thesis matche
 encoder are matched too, and the report says so.
 
 Example:
-    >>> from temporal_torchrl.experiments.published import Configuration, find_published
+    >>> from temporal_torchrl.reports.published import Configuration, find_published
     >>> furl = Configuration("furl", None, rho=0.05, protocol="stage2")
     >>> result = find_published(furl, "ras")
     >>> result.tables, result.cells["drawer-open"].mean
@@ -27,7 +27,7 @@ from typing import Any
 
 import yaml
 
-from temporal_torchrl.experiments.runs import uses_baseline
+from temporal_torchrl.reports.groups import uses_baseline
 from temporal_torchrl.runs import none_or_name
 from temporal_torchrl.runs.layout import protocol_name
 

@@ -7,7 +7,7 @@
 - :func:`plot_reward_curves`: r_P and r_D along a positive and a negative episode (Figure 5.12).
 - :func:`plot_aggregate_intervals`, :func:`plot_performance_profiles`,
   :func:`plot_improvement`: the rliable aggregates of
-  :mod:`~temporal_torchrl.experiments.reliable`, drawn with ``rliable.plot_utils``.
+  :mod:`~temporal_torchrl.reports.reliable`, drawn with ``rliable.plot_utils``.
 
 Seeds are averaged where all of them have data: up to the shortest run's last episode (or, for
 logged metrics, over the step range all runs share). Past that point the longer runs are drawn
@@ -32,11 +32,11 @@ from matplotlib.lines import Line2D
 from rliable import plot_utils
 
 from temporal_torchrl.envs import get_task
-from temporal_torchrl.experiments.logs import Series
-from temporal_torchrl.experiments.reliable import ReliableTable
-from temporal_torchrl.experiments.reward_curves import EpisodeRewards
-from temporal_torchrl.experiments.runs import Run, RunGroup, order_tasks
-from temporal_torchrl.metrics import DEFAULT_WINDOW
+from temporal_torchrl.protocol_metrics import DEFAULT_WINDOW
+from temporal_torchrl.reports.groups import Run, RunGroup, order_tasks
+from temporal_torchrl.reports.logs import Series
+from temporal_torchrl.reports.reliable import ReliableTable
+from temporal_torchrl.reports.reward_curves import EpisodeRewards
 
 #: The thesis's colours in Figure 5.12: positive blue, negative orange.
 POSITIVE_COLOUR, NEGATIVE_COLOUR = "tab:blue", "tab:orange"

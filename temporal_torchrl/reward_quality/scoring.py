@@ -27,7 +27,11 @@ from torch import Tensor
 
 from temporal_torchrl.data import episode_history
 from temporal_torchrl.envs import first_success_index
-from temporal_torchrl.evaluation.metrics import auroc, direction_accuracy, value_order_correlation
+from temporal_torchrl.reward_quality.metrics import (
+    auroc,
+    direction_accuracy,
+    value_order_correlation,
+)
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, TemporalReward
 
 POSITIONAL_KIND = "positional"

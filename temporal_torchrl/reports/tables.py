@@ -1,6 +1,6 @@
 """Markdown and CSV renderings of the report's tables.
 
-:class:`~temporal_torchrl.experiments.aggregate.MetricTable` (:func:`table_markdown`,
+:class:`~temporal_torchrl.reports.aggregate.MetricTable` (:func:`table_markdown`,
 :func:`table_rows`) follows the thesis's tables: tasks as rows, configurations as columns,
 ``mean ± std (n=seeds)``, an Average row, the best value of each row in bold (lowest TTFS /
 TT50S, highest RAS; only cells whose runs all have a value compete). Runs without a value are
@@ -8,7 +8,7 @@ written out in their cell (``1 incomplete: 120/300 ep``, ``1 censored: > 85 ep``
 number. The CSV has one row per cell with the thesis's published value and the difference
 where the configuration matches.
 
-:class:`~temporal_torchrl.experiments.reliable.ReliableTable` (:func:`reliable_markdown`,
+:class:`~temporal_torchrl.reports.reliable.ReliableTable` (:func:`reliable_markdown`,
 :func:`reliable_rows`): one row per configuration, its IQM and mean of normalised scores over
 tasks and seeds and its probability of improvement over the baseline, each with its 95% CI.
 """
@@ -19,7 +19,7 @@ import csv
 from collections.abc import Sequence
 from pathlib import Path
 
-from temporal_torchrl.experiments.aggregate import (
+from temporal_torchrl.reports.aggregate import (
     CENSORED,
     INCOMPLETE,
     METRICS,
@@ -29,9 +29,9 @@ from temporal_torchrl.experiments.aggregate import (
     RunValue,
     run_value,
 )
-from temporal_torchrl.experiments.published import PUBLISHED_ENCODER, PublishedCell
-from temporal_torchrl.experiments.reliable import Interval, ReliableTable, Scores, score_rule
-from temporal_torchrl.experiments.runs import RunGroup, distinguishing_keys
+from temporal_torchrl.reports.groups import RunGroup, distinguishing_keys
+from temporal_torchrl.reports.published import PUBLISHED_ENCODER, PublishedCell
+from temporal_torchrl.reports.reliable import Interval, ReliableTable, Scores, score_rule
 from temporal_torchrl.runs import has_vlm_reward
 
 CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "best", "status",

@@ -12,7 +12,7 @@ A cell (one configuration on one task) holds the runs' values: the mean and the 
 (n - 1), as the thesis prints them, over the runs that have a value; runs without one are listed
 with the cell, never averaged in. The Average row is the mean of the task means, as in the
 thesis, given only when a configuration has complete cells on every task of the table. Interval
-estimates are :mod:`~temporal_torchrl.experiments.reliable`'s (rliable), over tasks and seeds.
+estimates are :mod:`~temporal_torchrl.reports.reliable`'s (rliable), over tasks and seeds.
 """
 
 from __future__ import annotations
@@ -23,13 +23,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from temporal_torchrl.envs import get_task
-from temporal_torchrl.experiments.published import (
+from temporal_torchrl.protocol_metrics import (
+    DEFAULT_HORIZON,
+    DEFAULT_WINDOW,
+    ras,
+    time_to_successes,
+)
+from temporal_torchrl.reports.groups import Run, RunGroup, order_tasks
+from temporal_torchrl.reports.published import (
     Configuration,
     PublishedResult,
     find_published,
 )
-from temporal_torchrl.experiments.runs import Run, RunGroup, order_tasks
-from temporal_torchrl.metrics import DEFAULT_HORIZON, DEFAULT_WINDOW, ras, time_to_successes
 
 #: A run has the metric.
 VALUE = "value"
