@@ -40,6 +40,7 @@ from temporal_torchrl.metrics import DEFAULT_HORIZON, episode_success, ras, tt50
 from temporal_torchrl.training import (
     MetricWindow,
     RunDirectory,
+    RunLockedError,
     factories,
     log_metrics,
     reward_statistics,
@@ -70,11 +71,17 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     """
     validate_config(cfg)
     run = RunDirectory(run_directory(cfg))
+    with run.lock():  # one writer per run directory, for the whole run
+        return _train(cfg, run, given_keys)
+
+
+def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | None) -> dict | None:
+    """:func:`train`, once the run's lock is held."""
     run.check(resume=cfg.resume, overwrite=cfg.overwrite)
     if cfg.resume:
         cfg = resumed_config(cfg, run.path, given_keys)
         validate_config(cfg)  # the saved config, continued, is the one that runs
-    state = run.load_checkpoint() if cfg.resume else None
+    state = run.resume_state() if cfg.resume else None
     if state is not None and state["episode"] >= cfg.train.episodes and run.summary():
         print(f"{run.path}: already complete ({state['episode']} episodes)")
         return run.summary()
@@ -132,7 +139,6 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         credits = dict(state.get("credits", {"sac": 0.0, "reward": 0.0}))
         for rows in run.replay_episodes(inserted):
             buffer.extend(rows)
-        run.truncate_episodes(episode)
     collector = factories.make_collector(cfg, env, actor,
                                          max(0, cfg.train.random_steps - env_steps))
     if state is not None:  # after every random draw the build makes
@@ -218,6 +224,11 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     collector.shutdown()
     if episode < cfg.train.episodes:
         return None  # stopped early, as if killed (train.stop_after_episodes)
+    if metrics.pending:  # the last window, shorter than logger.log_every updates
+        last_metrics = metrics.flush()
+        last_metrics.update({"train/stage": 2.0 if buffer.has_positives else 1.0,
+                             "train/positive_states": buffer.num_positive_states})
+        log_metrics(logger, last_metrics, env_steps)
 
     # ---- summary
     elapsed = time.perf_counter() - start_time
@@ -250,7 +261,13 @@ def main(cfg: DictConfig) -> None:
         cfg = sweep_job_config(cfg, hydra_config)
     if cfg.train.threads is not None:
         torch.set_num_threads(cfg.train.threads)
-    summary = train(cfg, given_keys=override_keys(hydra_config.overrides.task))
+    try:
+        summary = train(cfg, given_keys=override_keys(hydra_config.overrides.task))
+    except RunLockedError as error:
+        if hydra_config.mode != RunMode.MULTIRUN:
+            raise
+        print(error.skip_line())  # the other jobs of the sweep go on
+        return
     if summary is not None:
         print({key: summary[key] for key in ("ttfs", "tt50s", "ras", "episodes", "env_steps",
                                               "steps_per_second")})
