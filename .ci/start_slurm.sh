@@ -52,8 +52,8 @@ JobAcctGatherType=jobacct_gather/none
 AccountingStorageType=accounting_storage/none
 ReturnToService=2
 # scancel sends SIGTERM, then SIGKILL after KillWait: submitit's job wrapper ignores SIGTERM,
-# so a short wait makes a cancelled job end within seconds.
-KillWait=5
+# so a short wait makes a cancelled job end within seconds (tests/test_slurm.py cancels one).
+KillWait=1
 StateSaveLocation=/var/spool/slurmctld
 SlurmdSpoolDir=/var/spool/slurmd
 SlurmctldPidFile=/run/slurmctld.pid
