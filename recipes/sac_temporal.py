@@ -67,7 +67,8 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     """Run (or resume) one training run; returns its summary, or None when stopped early.
 
     ``given_keys``: the keys set on the command line, which alone may change a resumed run's
-    ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do).
+    ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do). The run
+    directory's lock is held throughout: ``RunLockedError`` at once when a live process holds it.
     """
     validate_config(cfg)
     run = RunDirectory(run_directory(cfg))

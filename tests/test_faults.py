@@ -146,7 +146,8 @@ def test_sigkill_at_random_points_then_resume_gives_the_uninterrupted_episodes(t
 def test_a_truncated_checkpoint_falls_back_to_the_previous_one(tmp_path, capsys):
     """checkpoint.pt cut to 5,000 bytes (a kill on a filesystem that lost the tail): resume says
     so, continues from checkpoint.previous.pt (one episode earlier), cuts episodes.csv and the
-    replay back to it, and ends with the uninterrupted run's episodes."""
+    replay back to it, keeps the cut file aside, and ends with the uninterrupted run's
+    episodes."""
     common = ["train.episodes=5"]
     sac_temporal.train(config(tmp_path / "reference", *common))
     sac_temporal.train(config(tmp_path, *common, "train.stop_after_episodes=3"))
@@ -162,9 +163,14 @@ def test_a_truncated_checkpoint_falls_back_to_the_previous_one(tmp_path, capsys)
     out = capsys.readouterr().out
     assert "checkpoint.pt is unreadable" in out and "continuing from the previous checkpoint" in out
     assert "(episode 2)" in out
+    assert "(the unreadable one is kept as checkpoint.pt.unreadable)" in out
+    assert (run.path / "checkpoint.pt.unreadable").stat().st_size == 5000
     summary = sac_temporal.train(config(tmp_path, *common, "resume=true"))
     assert summary["episodes"] == 5
     assert episode_rows(run.path) == episode_rows(tmp_path / "reference" / "run")
+    # The cut checkpoint never became the fallback: both checkpoints read, one episode apart.
+    assert torch.load(run.previous_checkpoint_path, weights_only=True)["episode"] == 4
+    assert run.load_checkpoint()["episode"] == 5
 
 
 def test_no_readable_checkpoint_is_a_clear_error(tmp_path):
@@ -216,6 +222,7 @@ def test_a_second_process_stops_at_once_and_a_killed_holder_leaves_no_stale_lock
         assert time.perf_counter() - started < 5  # at once: no waiting on the lock
         message = str(error.value)
         assert f"pid {holder} on host {socket.gethostname()}, since 20" in message
+        assert f"stop it (kill {holder} on {socket.gethostname()})" in message
         assert "resume=true" in message and "another output_dir" in message
         assert error.value.path == run_dir
     finally:

@@ -168,3 +168,34 @@ def test_a_short_window_is_pending_until_flushed():
     window.add("sac", TensorDict({"alpha": torch.tensor(0.5)}, []))
     assert window.pending
     assert window.flush() == {"sac/alpha": 0.5} and not window.pending
+
+
+def test_a_forked_worker_does_not_keep_a_killed_runs_lock(tmp_path):
+    """A run's env workers may be forked (ParallelEnv) and outlive a SIGKILLed run: the lock
+    still goes with the run, so the resume is not blocked by an orphan."""
+    import signal
+    import time
+
+    run = RunDirectory(tmp_path / "run")
+    ready, tell = os.pipe()
+    runner = os.fork()
+    if runner == 0:
+        try:
+            with run.lock():
+                worker = os.fork()
+                if worker == 0:
+                    time.sleep(60)
+                    os._exit(0)
+                os.write(tell, str(worker).encode())
+                time.sleep(60)
+        finally:
+            os._exit(1)
+    worker = int(os.read(ready, 20))
+    try:
+        assert run.locked_by() is not None
+        os.kill(runner, signal.SIGKILL)
+        os.waitpid(runner, 0)
+        assert Path(f"/proc/{worker}").exists()  # the orphaned worker lives on
+        assert run.locked_by() is None
+    finally:
+        os.kill(worker, signal.SIGKILL)

@@ -2,14 +2,15 @@
 
 Layout::
 
-    <run>/config.json             the resolved config the run started with
-    <run>/episodes.csv            one row per finished episode (:data:`EPISODE_COLUMNS`)
-    <run>/replay/NNNNNN.pt        the stored rows of every episode inserted into the buffer
-    <run>/checkpoint.pt           networks, optimizers, counters, RNG states (every few episodes)
-    <run>/checkpoint.previous.pt  the checkpoint before it, kept until the new one is complete
-    <run>/summary.json            TTFS, TT50S, RAS, throughput (when the run has ended)
-    <run>/run.lock, run.lock.json the writer's lock and who holds it (host, pid, since)
-    <run>/logs/, wandb/           the logger's files
+    <run>/config.json               the resolved config the run started with
+    <run>/episodes.csv              one row per finished episode (:data:`EPISODE_COLUMNS`)
+    <run>/replay/NNNNNN.pt          the stored rows of every episode inserted into the buffer
+    <run>/checkpoint.pt             networks, optimizers, counters, RNG states (every few episodes)
+    <run>/checkpoint.previous.pt    the one before, kept until the new one is complete
+    <run>/checkpoint.pt.unreadable  a latest checkpoint a resume could not read, kept aside
+    <run>/summary.json              TTFS, TT50S, RAS, throughput (when the run has ended)
+    <run>/run.lock, run.lock.json   the writer's lock and who holds it (host, pid, since)
+    <run>/logs/, wandb/             the logger's files
 
 Guarantees:
 
@@ -68,6 +69,8 @@ from tensordict import TensorDict, TensorDictBase
 EPISODE_COLUMNS = ("episode", "env_steps", "success", "return", "mean_vlm_reward", "stage")
 CHECKPOINT = "checkpoint.pt"
 PREVIOUS_CHECKPOINT = "checkpoint.previous.pt"
+#: Where a resume moves a latest checkpoint it could not read.
+UNREADABLE_CHECKPOINT = "checkpoint.pt.unreadable"
 REPLAY_DIR = "replay"
 LOCK = "run.lock"
 LOCK_HOLDER = "run.lock.json"
@@ -82,21 +85,37 @@ class RunLockedError(RuntimeError):
     Attributes:
         path: the run directory.
         holder: who holds it, e.g. ``"pid 4242 on host node7 (Slurm job 181), since
-            2026-12-01 17:03:12+00:00"``.
+            2026-12-01T17:03:12+00:00"``.
     """
 
-    def __init__(self, path: Path, holder: str) -> None:
-        self.path, self.holder = path, holder
+    def __init__(self, path: Path, holder: dict[str, Any] | None) -> None:
+        self.path, self.holder = path, describe_holder(holder)
+        if holder is None:
+            stop = "stop it"
+        elif holder.get("slurm_job_id"):
+            stop = f"stop it (scancel {holder['slurm_job_id']})"
+        else:
+            stop = f"stop it (kill {holder.get('pid')} on {holder.get('host')})"
         super().__init__(
-            f"output_dir={str(path)!r} is in use: {holder} is writing this run (it holds "
+            f"output_dir={str(path)!r} is in use: {self.holder} is writing this run (it holds "
             f"{path / LOCK}). One process at a time may write a run. Wait for that process to "
-            "end, or stop it, then continue the run with resume=true (a killed process releases "
+            f"end, or {stop}, then continue the run with resume=true (a killed process releases "
             "the lock at once: there is no lock file to delete); or pass another output_dir.")
 
     def skip_line(self) -> str:
         """What a sweep job prints when it leaves a run alone that a live job is writing."""
         return (f"{self.path}: skipped, {self.holder} is writing this run; launch the sweep again "
                 "after it has ended to continue the run")
+
+
+def describe_holder(holder: dict[str, Any] | None) -> str:
+    """``pid P on host H (Slurm job J), since T`` from a lock's ``run.lock.json``."""
+    if holder is None:
+        return f"another process (its details, {LOCK_HOLDER}, are not written yet)"
+    text = f"pid {holder.get('pid')} on host {holder.get('host')}"
+    if holder.get("slurm_job_id"):
+        text += f" (Slurm job {holder['slurm_job_id']})"
+    return f"{text}, since {holder.get('since')}"
 
 
 class UnreadableRunFile(RuntimeError):
@@ -141,7 +160,7 @@ class RunDirectory:
         try:
             file_lock.acquire()
         except Timeout:
-            raise RunLockedError(self.path, self._holder_text()) from None
+            raise RunLockedError(self.path, self._holder()) from None
         try:
             job = os.environ.get("SLURM_JOB_ID")
             write_json(self.path / LOCK_HOLDER, {
@@ -151,7 +170,7 @@ class RunDirectory:
             yield
         finally:
             empty = created and not self.holds_files()
-            if empty:  # unlinked while still held, so no other process can lock this file
+            if empty:  # unlinked before the release: a later process makes a new lock file
                 for name in LOCK_FILES:
                     (self.path / name).unlink(missing_ok=True)
             file_lock.release()
@@ -170,19 +189,16 @@ class RunDirectory:
         try:
             probe.acquire()
         except Timeout:
-            return self._holder_text()
+            return describe_holder(self._holder())
         probe.release()
         return None
 
-    def _holder_text(self) -> str:
+    def _holder(self) -> dict[str, Any] | None:
         try:
             holder = json.loads((self.path / LOCK_HOLDER).read_text())
-            text = f"pid {holder['pid']} on host {holder['host']}"
-        except (OSError, ValueError, KeyError, TypeError):
-            return f"another process (its details, {LOCK_HOLDER}, are not written yet)"
-        if holder.get("slurm_job_id"):
-            text += f" (Slurm job {holder['slurm_job_id']})"
-        return f"{text}, since {holder.get('since')}"
+        except (OSError, ValueError):
+            return None
+        return holder if isinstance(holder, dict) else None
 
     # ------------------------------------------------------------------ start, replace, resume
     def check(self, *, resume: bool, overwrite: bool) -> None:
@@ -227,16 +243,25 @@ class RunDirectory:
         """The state to resume from (:meth:`load_checkpoint`, falling back to the previous
         checkpoint), with ``episodes.csv`` and ``replay/`` cut back to it: the rows and replay
         episodes of the episodes after it are dropped, as is a summary of a longer run."""
-        state = self.load_checkpoint()
+        state, fallback = self._load_checkpoint()
+        if fallback is not None:
+            if self.checkpoint_path.exists():
+                # Kept for a look, but out of the way: the next checkpoint would otherwise make
+                # it the previous one, the fallback of the next resume.
+                os.replace(self.checkpoint_path, self.path / UNREADABLE_CHECKPOINT)
+                fallback += f" (the unreadable one is kept as {UNREADABLE_CHECKPOINT})"
+            print(fallback)
         self.truncate_episodes(state["episode"])
-        for path in (self.path / REPLAY_DIR).iterdir():
-            after = path.stem.isdigit() and int(path.stem) >= state["inserted"]
-            if after or path.suffix == ".tmp":
-                path.unlink()
+        replay = self.path / REPLAY_DIR
+        if replay.is_dir():  # (without it, replay_episodes names the first missing episode)
+            for path in replay.iterdir():
+                after = path.stem.isdigit() and int(path.stem) >= state["inserted"]
+                if after or path.suffix == ".tmp":
+                    path.unlink()
+            fsync_directory(replay)
         summary = self.summary()
         if summary is not None and summary.get("episodes", 0) > state["episode"]:
             (self.path / "summary.json").unlink()
-        fsync_directory(self.path / REPLAY_DIR)
         return state
 
     # ------------------------------------------------------------------ episode rows
@@ -319,6 +344,14 @@ class RunDirectory:
         """The latest readable checkpoint's state, on the CPU (``load_state_dict`` copies it to
         the modules' devices): ``checkpoint.pt``, else (saying so) ``checkpoint.previous.pt``;
         :class:`UnreadableRunFile` when neither can be read."""
+        state, fallback = self._load_checkpoint()
+        if fallback is not None:
+            print(fallback)
+        return state
+
+    def _load_checkpoint(self) -> tuple[dict[str, Any], str | None]:
+        """The latest readable state, and the line saying why it is the previous one (None
+        when it is the latest)."""
         problems = []
         for path in (self.checkpoint_path, self.previous_checkpoint_path):
             if not path.exists():
@@ -331,10 +364,12 @@ class RunDirectory:
             except Exception as error:  # noqa: BLE001 (any failure to read means the same)
                 problems.append(f"{path.name} is unreadable ({type(error).__name__}: {error})")
                 continue
+            fallback = None
             if problems:
-                print(f"resume: {problems[0]}; continuing from the previous checkpoint, {path} "
-                      f"(episode {state.get('episode')}): the episodes after it run again")
-            return state
+                fallback = (f"resume: {problems[0]}; continuing from the previous checkpoint, "
+                            f"{path} (episode {state.get('episode')}): the episodes after it run "
+                            "again")
+            return state, fallback
         raise UnreadableRunFile(
             f"no readable checkpoint in {self.path}: {'; '.join(problems)}. Restore "
             f"{CHECKPOINT} from a backup and resume again, or {_START_OVER}.")
