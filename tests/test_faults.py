@@ -2,10 +2,12 @@
 writes too), a truncated checkpoint, unreadable files, a second writer, a stale lock. Every
 interrupted run must end with the episodes of the uninterrupted one.
 
-The killed runs are forked from the test process (a real process, killed with SIGKILL), so each
-life costs no interpreter start; tests/slow_writes.py does the same through the command line.
+The killed runs are forked from the test process (real processes, killed with SIGKILL), so a
+life costs no interpreter start; test_recipe.py's test_killed_process_resumes kills the command
+line itself.
 """
 
+import io
 import os
 import random
 import signal
@@ -38,8 +40,6 @@ def slow_writes(marker: Path, seconds: float) -> None:
 
     def slow(path, write):
         def in_two_halves(file):
-            import io
-
             whole = io.BytesIO()
             write(whole)
             data = whole.getvalue()
