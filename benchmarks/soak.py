@@ -95,36 +95,41 @@ def main() -> None:
         time.sleep(args.interval)
     if process.returncode != 0:
         raise SystemExit(f"the run failed ({process.returncode}):\n{process.stderr.read()[-3000:]}")
-    seconds, episodes, memory, size = (np.array(column, dtype=float) for column in zip(*samples,
-                                                                                        strict=True))
+    seconds, episodes, memory, size = (np.array(column, dtype=float)
+                                       for column in zip(*samples, strict=True))
 
-    rows = []
-    marks = np.linspace(0, args.episodes, 11).astype(int)[1:]
-    previous_time, previous_episode = None, None
-    for mark in marks:
-        index = int(np.argmax(episodes >= mark)) if (episodes >= mark).any() else len(episodes) - 1
-        at = seconds[index]
-        pace = (None if previous_time is None
-                else (at - previous_time) / max(episodes[index] - previous_episode, 1))
-        rows.append({"episode": int(episodes[index]), "elapsed s": round(at, 1),
-                     "resident MB": round(memory[index], 1),
-                     "s/episode since last row": round(pace, 3) if pace is not None else "-",
-                     "run dir MB": round(size[index] / 2**20, 2)})
-        previous_time, previous_episode = at, episodes[index]
     # Training samples only: the last ones are taken while the process writes its summary and
-    # exits.
-    steady = (episodes >= args.warmup) & (episodes < args.episodes)
+    # exits, having freed the collector.
+    training = episodes < args.episodes
+    seconds, episodes, memory, size = (column[training] for column in
+                                       (seconds, episodes, memory, size))
+    rows = []
+    previous = None
+    for mark in np.linspace(0, args.episodes, 11).astype(int)[1:]:
+        index = int(np.argmax(episodes >= mark)) if (episodes >= mark).any() else len(episodes) - 1
+        if index == previous:  # the last rows, past the last training sample
+            continue
+        pace = ("-" if previous is None else round(
+            (seconds[index] - seconds[previous]) / max(episodes[index] - episodes[previous], 1), 3))
+        rows.append({"episode": int(episodes[index]), "elapsed s": round(seconds[index], 1),
+                     "resident MB": round(memory[index], 1), "s/episode since last row": pace,
+                     "run dir MB": round(size[index] / 2**20, 2)})
+        previous = index
+    steady = episodes >= args.warmup
+    second_half = episodes >= args.episodes // 2
     # Per-episode times from the moments episodes.csv grew, after the warm-up.
     grew = np.flatnonzero(np.diff(episodes) > 0) + 1
     grew = grew[episodes[grew] >= args.warmup]
     pace = np.diff(seconds[grew]) / np.diff(episodes[grew])
     summary = {
         "episodes": args.episodes, "steps per episode": args.steps,
-        "wall s": round(seconds[-1], 1),
-        "resident MB, start of steady state": round(memory[steady][0], 1),
-        "resident MB, last episodes": round(memory[steady][-1], 1),
+        "wall s": round(float(seconds[-1]), 1),
+        "resident MB after warm-up": round(float(memory[steady][0]), 1),
+        "resident MB, last episode": round(float(memory[-1]), 1),
         "resident MB per 100 episodes (slope)": round(100 * slope(episodes[steady],
                                                                    memory[steady]), 3),
+        "the same, second half": round(100 * slope(episodes[second_half], memory[second_half]),
+                                       3),
         "s/episode, mean after warm-up": round(float(pace.mean()), 4),
         "s/episode per 100 episodes (slope)": round(100 * slope(episodes[grew][1:], pace), 5),
         "run dir KB per episode (slope)": round(slope(episodes[steady], size[steady]) / 1024, 2),
