@@ -41,6 +41,7 @@ from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, episode_success, 
 from temporal_torchrl.training import (
     MetricWindow,
     RunDirectory,
+    RunLockedError,
     factories,
     log_metrics,
     reward_statistics,
@@ -68,15 +69,22 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     """Run (or resume) one training run; returns its summary, or None when stopped early.
 
     ``given_keys``: the keys set on the command line, which alone may change a resumed run's
-    ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do).
+    ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do). The run
+    directory's lock is held throughout: ``RunLockedError`` at once when a live process holds it.
     """
     validate_config(cfg)
     run = RunDirectory(run_directory(cfg))
+    with run.lock():  # one writer per run directory, for the whole run
+        return _train(cfg, run, given_keys)
+
+
+def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | None) -> dict | None:
+    """:func:`train`, once the run's lock is held."""
     run.check(resume=cfg.resume, overwrite=cfg.overwrite)
     if cfg.resume:
         cfg = resumed_config(cfg, run.path, given_keys)
         validate_config(cfg)  # the saved config, continued, is the one that runs
-    state = run.load_checkpoint() if cfg.resume else None
+    state = run.resume_state() if cfg.resume else None
     if state is not None and state["episode"] >= cfg.train.episodes and run.summary():
         print(f"{run.path}: already complete ({state['episode']} episodes)")
         return run.summary()
@@ -131,9 +139,6 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
         credits = dict(state.get("credits", {"sac": 0.0, "reward": 0.0}))
         for rows in run.replay_episodes(inserted):
             buffer.extend(rows)
-        run.truncate_episodes(episode)
-        run.truncate_positives(episode)
-        run.truncate_metrics(env_steps)
     relay = (factories.make_relay(cfg, env, actor, buffer.num_positive_states)
              if cfg.train.relay and trainer is not None else None)
     if relay is not None and state is not None:
@@ -240,6 +245,11 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     collector.shutdown()
     if episode < cfg.train.episodes:
         return None  # stopped early, as if killed (train.stop_after_episodes)
+    if metrics.pending:  # the last window, shorter than logger.log_every updates
+        last_metrics = metrics.flush()
+        last_metrics.update({"train/stage": 2.0 if buffer.has_positives else 1.0,
+                             "train/positive_states": buffer.num_positive_states})
+        log_metrics(logger, last_metrics, env_steps)
 
     # ---- summary
     elapsed = time.perf_counter() - start_time
@@ -283,7 +293,13 @@ def main(cfg: DictConfig) -> None:
         cfg = sweep_job_config(cfg, hydra_config)
     if cfg.train.threads is not None:
         torch.set_num_threads(cfg.train.threads)
-    summary = train(cfg, given_keys=override_keys(hydra_config.overrides.task))
+    try:
+        summary = train(cfg, given_keys=override_keys(hydra_config.overrides.task))
+    except RunLockedError as error:
+        if hydra_config.mode != RunMode.MULTIRUN:
+            raise
+        print(error.skip_line())  # the other jobs of the sweep go on
+        return
     if summary is not None:
         print({key: summary[key] for key in ("ttfs", "tt50s", "ras", "episodes", "env_steps",
                                               "steps_per_second")})

@@ -269,6 +269,24 @@ def test_training_metrics_are_logged_and_summarised(tmp_path):
     assert [int(line.split(",")[0]) for line in logged] == [20, 30, 40]  # env steps
 
 
+def test_a_run_shorter_than_the_log_window_still_logs_its_metrics(tmp_path):
+    """20 updates, logger.log_every 1000: the last (only) window is flushed when the run ends,
+    into the logger at the last env step and into summary.json."""
+    summary = sac_temporal.train(config(tmp_path, "train.episodes=2", "logger.backend=csv"))
+    run_dir = tmp_path / "run"
+    assert summary["updates"] == 20  # from the first stored episode on (step 21 to 40)
+    metrics = summary["last_metrics"]
+    assert json.loads((run_dir / "summary.json").read_text())["last_metrics"] == metrics
+    for key in ("sac/loss_actor", "sac/loss_qvalue", "sac/alpha", "relabelled/r_P_mean",
+                "relabelled/r_D_std", "train/stage"):
+        assert key in metrics, key
+    assert metrics["sac/alpha"] == pytest.approx(1.0, abs=0.01)  # 20 steps of lr 1e-4
+    logged = next((run_dir / "logs").rglob("sac/alpha.csv")).read_text().splitlines()
+    assert len(logged) == 1
+    step, value = logged[0].split(",")
+    assert int(step) == 40 and float(value) == pytest.approx(metrics["sac/alpha"])
+
+
 def test_kill_and_resume_continues_the_run(tmp_path):
     sac_temporal.train(config(tmp_path, "train.episodes=4", "train.stop_after_episodes=2"))
     run_dir = tmp_path / "run"
@@ -283,12 +301,14 @@ def test_kill_and_resume_continues_the_run(tmp_path):
     rows = episode_rows(run_dir)
     assert [int(row["episode"]) for row in rows] == [1, 2, 3, 4]
     assert [int(row["env_steps"]) for row in rows] == [20, 40, 60, 80]
-    # metrics.jsonl with logger.backend=none: the episode points once each, then the summary
+    # metrics.jsonl with logger.backend=none: the episode points once each, the last (partial)
+    # window of training metrics, then the summary
     points = RunDirectory(run_dir).metric_points()
-    assert [point["step"] for point in points] == [20, 40, 60, 80, 80]
+    assert [point["step"] for point in points] == [20, 40, 60, 80, 80, 80]
     assert [point["train/success"] for point in points[:4]] == [
         float(row["success"]) for row in rows]
-    assert set(points[4]) == {"step", "summary/ttfs", "summary/tt50s"}
+    assert "sac/loss_qvalue" in points[4]
+    assert set(points[5]) == {"step", "summary/ttfs", "summary/tt50s"}
     assert summary["episodes"] == 4 and summary["env_steps"] == 80
     assert RunDirectory(run_dir).load_checkpoint()["inserted"] == 4
 
@@ -393,7 +413,8 @@ def test_run_stopped_before_its_first_checkpoint_is_replaced_not_resumed(tmp_pat
 
 @pytest.mark.slow
 def test_killed_process_resumes(tmp_path):
-    """A real SIGKILL in the middle of an episode, then resume=true in a new process."""
+    """A second process on the running run is refused; a real SIGKILL in the middle of an
+    episode, then resume=true in a new process."""
     import os
     import signal
     import subprocess
@@ -410,6 +431,10 @@ def test_killed_process_resumes(tmp_path):
     while time.time() < deadline and (not (run_dir / "episodes.csv").exists()
                                       or len(episode_rows(run_dir)) < 3):
         time.sleep(0.05)
+    # A second process on the live run stops at once, naming the first (no extra rows written).
+    second = subprocess.run([*args, "resume=true"], capture_output=True, text=True, timeout=300)
+    assert second.returncode != 0
+    assert f"is in use: pid {process.pid} on host" in second.stderr, second.stderr[-2000:]
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
     done = RunDirectory(run_dir).load_checkpoint()["episode"]

@@ -1,15 +1,25 @@
 """Run management: the overwrite rules, episode rows cut back to the checkpoint, replay episodes
-and RNG states that round-trip, and files that are never left half-written."""
+and RNG states that round-trip, files flushed to disk before they replace the old ones, the
+previous checkpoint kept, and the writer's lock."""
 
+import os
 import random
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from test_replay import make_episode
 
+import temporal_torchrl.training.run as run_module
 from temporal_torchrl.data import episode_rows
-from temporal_torchrl.training import RunDirectory, rng_state, set_rng_state
+from temporal_torchrl.training import (
+    MetricWindow,
+    RunDirectory,
+    RunLockedError,
+    rng_state,
+    set_rng_state,
+)
 
 ROW = {"episode": 1, "env_steps": 20, "success": 0, "return": -20.0, "mean_vlm_reward": 0.5,
        "stage": 1}
@@ -119,3 +129,111 @@ def test_rng_state_restores_every_generator(tmp_path):
     assert torch.equal(torch.rand(3), expected[0])
     assert random.random() == expected[1]
     assert np.array_equal(np.random.rand(2), expected[2])
+
+
+def test_files_reach_the_disk_before_they_replace_the_old_ones(tmp_path, monkeypatch):
+    """The order of a checkpoint write: the new file fsync'd, the old checkpoint renamed to the
+    previous one, the new one renamed in, the directory fsync'd; a replay episode and a JSON
+    file likewise (fsync, rename, directory fsync)."""
+    run = RunDirectory(tmp_path / "run")
+    run.create(config={})
+    run.save_checkpoint({"episode": 1})
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+    monkeypatch.setattr(run_module.os, "fsync", lambda fd: (
+        events.append(("fsync", Path(os.readlink(f"/proc/self/fd/{fd}")).name)), real_fsync(fd)))
+    monkeypatch.setattr(run_module.os, "replace", lambda source, target: (
+        events.append(("replace", Path(source).name, Path(target).name)),
+        real_replace(source, target)))
+    run.save_checkpoint({"episode": 2})
+    assert events == [("fsync", "checkpoint.pt.tmp"),
+                      ("replace", "checkpoint.pt", "checkpoint.previous.pt"),
+                      ("replace", "checkpoint.pt.tmp", "checkpoint.pt"), ("fsync", "run")]
+    assert run.load_checkpoint()["episode"] == 2
+    assert torch.load(run.previous_checkpoint_path, weights_only=True)["episode"] == 1
+    events.clear()
+    run.save_replay_episode(0, episode_rows(make_episode(0, 3)))
+    run.write_summary({"episodes": 2})
+    assert events == [("fsync", "000000.pt.tmp"), ("replace", "000000.pt.tmp", "000000.pt"),
+                      ("fsync", "replay"), ("fsync", "summary.json.tmp"),
+                      ("replace", "summary.json.tmp", "summary.json"), ("fsync", "run")]
+    events.clear()
+    run.append_episode(ROW)
+    assert events == [("fsync", "episodes.csv"), ("fsync", "run")]  # a new file: its entry too
+
+
+def test_a_kill_between_the_checkpoint_renames_resumes_from_the_previous_one(tmp_path, capsys):
+    run = RunDirectory(tmp_path / "run")
+    run.create(config={})
+    run.save_checkpoint({"episode": 1, "inserted": 1})
+    run.save_checkpoint({"episode": 2, "inserted": 2})
+    run.checkpoint_path.rename(run.path / "checkpoint.pt.tmp")  # as left by a kill there
+    assert run.has_checkpoint()
+    run.check(resume=True, overwrite=False)
+    assert run.load_checkpoint()["episode"] == 1
+    assert ("checkpoint.pt does not exist; continuing from the previous checkpoint"
+            in capsys.readouterr().out)
+
+
+def test_the_lock_is_held_for_the_block_and_never_blocks_after_it(tmp_path):
+    run = RunDirectory(tmp_path / "run")
+    with run.lock():
+        assert "pid" in run.locked_by()  # this process holds it, through another descriptor
+        with pytest.raises(RunLockedError, match=f"pid {os.getpid()} on host"), run.lock():
+            pass
+        run.check(resume=False, overwrite=False)  # the lock's files are not a run
+        run.create(config={"seed": 1})
+        assert sorted(path.name for path in run.path.iterdir()) == [
+            "config.json", "replay", "run.lock", "run.lock.json"]
+        run.create(config={"seed": 2})  # overwrite keeps the lock it holds
+        assert (run.path / "run.lock").exists()
+    assert run.locked_by() is None
+    with run.lock():  # free again
+        assert run.config() == {"seed": 2}
+    # A directory the lock made and nothing else used is removed again (a run that never began).
+    unused = RunDirectory(tmp_path / "unused")
+    with pytest.raises(FileNotFoundError, match="start the run without resume=true"):
+        with unused.lock():
+            unused.check(resume=True, overwrite=False)
+    assert not unused.path.exists()
+
+
+def test_a_short_window_is_pending_until_flushed():
+    from tensordict import TensorDict
+
+    window = MetricWindow()
+    assert not window.pending
+    window.add("sac", TensorDict({"alpha": torch.tensor(0.5)}, []))
+    assert window.pending
+    assert window.flush() == {"sac/alpha": 0.5} and not window.pending
+
+
+def test_a_forked_worker_does_not_keep_a_killed_runs_lock(tmp_path):
+    """A run's env workers may be forked (ParallelEnv) and outlive a SIGKILLed run: the lock
+    still goes with the run, so the resume is not blocked by an orphan."""
+    import signal
+    import time
+
+    run = RunDirectory(tmp_path / "run")
+    ready, tell = os.pipe()
+    runner = os.fork()
+    if runner == 0:
+        try:
+            with run.lock():
+                worker = os.fork()
+                if worker == 0:
+                    time.sleep(60)
+                    os._exit(0)
+                os.write(tell, str(worker).encode())
+                time.sleep(60)
+        finally:
+            os._exit(1)
+    worker = int(os.read(ready, 20))
+    try:
+        assert run.locked_by() is not None
+        os.kill(runner, signal.SIGKILL)
+        os.waitpid(runner, 0)
+        assert Path(f"/proc/{worker}").exists()  # the orphaned worker lives on
+        assert run.locked_by() is None
+    finally:
+        os.kill(worker, signal.SIGKILL)

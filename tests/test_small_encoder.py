@@ -86,3 +86,32 @@ def test_bad_inputs_raise_value_errors(shipped, tmp_path):
     torch.save({"weights": torch.zeros(1)}, tmp_path / "other.pt")
     with pytest.raises(ValueError, match="not a small-encoder checkpoint"):
         SmallEncoder.from_pretrained(tmp_path / "other.pt")
+
+
+def test_frames_far_smaller_than_the_encoder_reads_are_refused_or_warned_about(shipped):
+    """The recipe's env.image_size=7 with the 64-px shipped encoder stops before any env is
+    built, naming the size it expects; 24 px (upsampled 2.7x) is warned about; 32 px and up, a
+    (height, width) pair, and encoders that read no pixels pass silently."""
+    import warnings
+
+    from temporal_torchrl.encoders import load_encoder
+    from temporal_torchrl.encoders.preprocessing import make_preprocessor
+    from temporal_torchrl.envs import make_temporal_env
+
+    assert shipped.frame_size == 64
+    with pytest.raises(ValueError, match=r"frames of 7x7 px are far smaller than the 64x64 px "
+                       r"frames the 'metaworld_small' encoder was trained on.*upsamples them "
+                       r"9\.1x.*env\.image_size=64"):
+        make_temporal_env("drawer-open", encoder=shipped, image_size=7)
+    with pytest.warns(UserWarning, match=r"frames of 24x24 px are smaller than the 64x64.*2\.7x"):
+        shipped.check_frame_size(24)
+    with pytest.warns(UserWarning, match="frames of 64x20 px"):
+        shipped.check_frame_size((64, 20))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for size in (32, 64, 256, (48, 64)):
+            shipped.check_frame_size(size)
+        load_encoder("state", dim=8).check_frame_size(7)
+    # LIV and open_clip read 224-px frames (the prior Metaworld crop needs 224 px of frame).
+    assert make_preprocessor("liv").frame_size == 224
+    assert make_preprocessor("metaworld_prior").frame_size == 224

@@ -112,3 +112,23 @@ def test_two_job_joblib_sweep_runs_resumes_and_reports(tmp_path):
     ttfs = (out / "ttfs.md").read_text()
     assert "drawer-open" in ttfs and ("2 censored" in ttfs or "(n=2)" in ttfs), ttfs
     assert (out / "success_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_sweep_job_resumes_restarts_or_leaves_alone_what_it_finds(tmp_path, capsys):
+    from temporal_torchrl.training import RunDirectory
+    from temporal_torchrl.training.config import run_directory, sweep_job_config
+
+    cfg = hydra_config(f"hydra.sweep.dir={tmp_path}", "encoder.name=state")
+    fresh = sweep_job_config(cfg, cfg.hydra)
+    run = RunDirectory(run_directory(fresh))
+    assert run.path.is_relative_to(tmp_path) and not (fresh.resume or fresh.overwrite)
+    run.create(config={})  # killed before its first checkpoint: started over, saying so
+    restarted = sweep_job_config(cfg, cfg.hydra)
+    assert restarted.overwrite and not restarted.resume
+    assert f"{run.path}: no checkpoint yet, starting it over" in capsys.readouterr().out
+    run.save_checkpoint({"episode": 1})
+    resumed = sweep_job_config(cfg, cfg.hydra)
+    assert resumed.resume and not resumed.overwrite
+    with run.lock():  # a live job writes it: nothing decided here, train() stops on the lock
+        left = sweep_job_config(cfg, cfg.hydra)
+    assert not (left.resume or left.overwrite) and capsys.readouterr().out == ""

@@ -12,12 +12,17 @@ statistics on every frame it embeds).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import torch
 from torch import nn
 
 INPUT_KEYS = ("pixels", "observation")
+#: Frames whose shorter side is below this fraction of :attr:`Encoder.frame_size` are refused,
+#: below :data:`WARN_FRAME_FRACTION` warned about: the encoder upsamples them into a blur.
+MIN_FRAME_FRACTION = 1 / 4
+WARN_FRAME_FRACTION = 1 / 2
 
 
 class Encoder(nn.Module):
@@ -49,6 +54,40 @@ class Encoder(nn.Module):
     def input_ndim(self) -> int:
         """Number of trailing dimensions of one input item: 3 for ``[H, W, 3]``, 1 for ``[39]``."""
         return 3 if self.input_key == "pixels" else 1
+
+    @property
+    def frame_size(self) -> int | None:
+        """Side of the square frames the image tower was trained on and reads (frames of another
+        size are resized to it); None for encoders that read no pixels."""
+        return None
+
+    def check_frame_size(self, size: int | Sequence[int]) -> None:
+        """Refuse (ValueError) or warn about rendered frames of ``size`` (a side, or ``(height,
+        width)``) far smaller than :attr:`frame_size`: below :data:`MIN_FRAME_FRACTION` of it
+        they are refused, below :data:`WARN_FRAME_FRACTION` warned about.
+
+        >>> from temporal_torchrl.encoders import load_encoder
+        >>> load_encoder("metaworld_small").check_frame_size(7)
+        Traceback (most recent call last):
+        ...
+        ValueError: frames of 7x7 px are far smaller than the 64x64 px frames the \
+'metaworld_small' encoder was trained on: ...
+        """
+        expected = self.frame_size
+        height, width = (size, size) if isinstance(size, int) else tuple(size)
+        side = min(height, width)
+        if expected is None or side <= 0 or side >= expected * WARN_FRAME_FRACTION:
+            return  # (a side <= 0 is the renderer's to refuse)
+        far = side < expected * MIN_FRAME_FRACTION
+        message = (
+            f"frames of {height}x{width} px are {'far ' if far else ''}smaller than the "
+            f"{expected}x{expected} px frames the {self.name!r} encoder was trained on: it "
+            f"upsamples them {expected / side:.1f}x, so its embeddings, and every VLM reward "
+            f"computed from them, describe a blur. Render at image_size={expected} (in the "
+            f"recipe: env.image_size={expected}).")
+        if far:
+            raise ValueError(message)
+        warnings.warn(message, stacklevel=2)
 
     @property
     def device(self) -> torch.device:

@@ -248,6 +248,10 @@ class OpenCLIPEncoder(Encoder):
     def device(self) -> torch.device:
         return self.model.logit_scale.device if hasattr(self, "model") else torch.device("cpu")
 
+    @property
+    def frame_size(self) -> int:
+        return self.preprocess.frame_size
+
     def preprocess_images(self, frames: torch.Tensor) -> torch.Tensor:
         """uint8 frames ``[N, H, W, 3]`` -> the image tower's input ``[N, 3, S, S]``."""
         return self.preprocess(frames)

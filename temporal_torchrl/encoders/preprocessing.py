@@ -88,6 +88,14 @@ class ImagePreprocessor(nn.Module):
         self.register_buffer("std", torch.tensor(std, dtype=torch.float32).view(1, 3, 1, 1),
                              persistent=False)
 
+    @property
+    def frame_size(self) -> int:
+        """The frame side this preprocessing is made for: the crop box's extent when there is
+        one (a smaller frame cannot hold it), else ``image_size``."""
+        if self.crop_box is not None:
+            return max(self.crop_box[1], self.crop_box[3])
+        return self.image_size
+
     def forward(self, frames: torch.Tensor) -> torch.Tensor:
         if frames.dtype != torch.uint8 or frames.ndim != 4 or frames.shape[-1] != 3:
             raise ValueError(

@@ -167,6 +167,10 @@ class SmallEncoder(Encoder):
     def image_size(self) -> int:
         return self.image_encoder.image_size
 
+    @property
+    def frame_size(self) -> int:
+        return self.image_size
+
     def config(self) -> dict[str, int | str]:
         """Constructor arguments, as saved next to the weights."""
         return {"image_size": self.image_size, "embedding_dim": self.dim,

@@ -67,6 +67,8 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs={num_envs!r}; expected an integer >= 1.")
     render = encoder is not None and encoder.input_key == "pixels"
+    if render:
+        encoder.check_frame_size(image_size)
     settings = {"render": render, "image_size": image_size, "camera": camera,
                 "fast_render": fast_render, "max_episode_steps": max_episode_steps}
     if num_envs == 1:

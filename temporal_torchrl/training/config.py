@@ -25,7 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 from temporal_torchrl.encoders import ENCODERS
 from temporal_torchrl.envs import TASKS, baseline_text
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
-from temporal_torchrl.training.run import CHECKPOINT
+from temporal_torchrl.training.run import RunDirectory
 
 LOGGER_BACKENDS = ("wandb", "csv", "none")
 
@@ -294,16 +294,17 @@ def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
     """One job of a ``-m`` sweep: its run directory under the sweep directory, resumed when a
     checkpoint is there (a re-launched sweep continues its runs, finished ones return at once),
     restarted when the job died before its first checkpoint, and torch threads set so that
-    parallel jobs share the cores instead of oversubscribing them."""
+    parallel jobs share the cores instead of oversubscribing them. A run a live process is
+    writing is left as it is: :func:`train` then stops on its lock (``RunLockedError``)."""
     cfg = copy.deepcopy(cfg)
     if cfg.runs_dir is None:
         cfg.runs_dir = hydra_config.sweep.dir
-    run_dir = run_directory(cfg)
-    if not cfg.overwrite and not cfg.resume and run_dir.exists():
-        if (run_dir / CHECKPOINT).exists():
+    run = RunDirectory(run_directory(cfg))
+    if not cfg.overwrite and not cfg.resume and run.locked_by() is None:
+        if run.has_checkpoint():
             cfg.resume = True
-        elif any(run_dir.iterdir()):
-            print(f"{run_dir}: no checkpoint yet, starting it over")
+        elif run.holds_files():
+            print(f"{run.path}: no checkpoint yet, starting it over")
             cfg.overwrite = True
     if cfg.train.threads is None:
         cfg.train.threads = threads_per_job(hydra_config.launcher)

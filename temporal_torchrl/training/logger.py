@@ -30,6 +30,11 @@ class MetricWindow:
         for key, value in values.items():
             self._values.setdefault(f"{prefix}/{key}", []).append(value.detach().float())
 
+    @property
+    def pending(self) -> bool:
+        """Whether anything was added since the last :meth:`flush`."""
+        return bool(self._values)
+
     def flush(self) -> dict[str, float]:
         means = {key: torch.stack(values).mean().item() for key, values in self._values.items()}
         self._values.clear()
