@@ -13,8 +13,8 @@ written.
     python recipes/sac_temporal.py output_dir=runs/x resume=true train.episodes=2000  # extend it
 
 Outputs in ``output_dir`` (default: ``runs/<task>/<method>_<protocol>/seed<seed>``, see
-:func:`temporal_torchrl.training.config.default_run_dir`; layout in
-:mod:`temporal_torchrl.training.run`): ``episodes.csv`` (episode, env_steps, success, return =
+:func:`temporal_torchrl.runs.default_run_dir`; layout in
+:mod:`temporal_torchrl.runs.directory`): ``episodes.csv`` (episode, env_steps, success, return =
 sum of sparse task rewards, mean_vlm_reward, stage), ``summary.json`` (TTFS, TT50S, RAS,
 throughput, the resolved config, the last training metrics), ``checkpoint.pt`` + ``replay/``
 (resume), ``metrics.jsonl`` (whatever ``logger.backend``: per-episode rows and, every
@@ -38,25 +38,24 @@ from tqdm import tqdm
 from temporal_torchrl.data import episode_rows
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, episode_success, ras, tt50s, ttfs
-from temporal_torchrl.training import (
-    MetricWindow,
+from temporal_torchrl.runs import (
     RunDirectory,
     RunLockedError,
+    override_keys,
+    resumed_config,
+    run_directory,
+    sweep_job_config,
+    uses_vlm_reward,
+)
+from temporal_torchrl.training import (
+    MetricWindow,
     factories,
     log_metrics,
     reward_statistics,
     rng_state,
     set_rng_state,
 )
-from temporal_torchrl.training.config import (
-    override_keys,
-    replay_capacity,
-    resumed_config,
-    run_directory,
-    sweep_job_config,
-    uses_vlm_reward,
-    validate_config,
-)
+from temporal_torchrl.training.config import replay_capacity, validate_config
 from temporal_torchrl.training.relay import RelayExploration
 
 # What an episode keeps from each step (pixels never reach the buffer).

@@ -23,8 +23,8 @@ import sac_temporal
 import torch
 from test_recipe import RECIPES, config, episode_rows
 
-import temporal_torchrl.training.run as run_module
-from temporal_torchrl.training import RunDirectory, RunLockedError, UnreadableRunFile
+import temporal_torchrl.runs.directory as run_module
+from temporal_torchrl.runs import RunDirectory, RunLockedError, UnreadableRunFile
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

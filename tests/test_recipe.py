@@ -10,8 +10,8 @@ import sac_temporal
 import torch
 from hydra import compose, initialize_config_dir
 
-from temporal_torchrl.training import RunDirectory, factories
-from temporal_torchrl.training.config import default_run_dir, override_keys, resumed_config
+from temporal_torchrl.runs import RunDirectory, default_run_dir, override_keys, resumed_config
+from temporal_torchrl.training import factories
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 

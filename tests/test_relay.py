@@ -11,7 +11,7 @@ from tensordict.nn import TensorDictModule
 from test_recipe import config, episode_rows
 from torchrl.data import Bounded
 
-from temporal_torchrl.training import RunDirectory
+from temporal_torchrl.runs import RunDirectory
 from temporal_torchrl.training.relay import RELAY_PERIODS, RelayPolicy, RelaySchedule
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

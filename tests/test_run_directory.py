@@ -11,15 +11,10 @@ import pytest
 import torch
 from test_replay import make_episode
 
-import temporal_torchrl.training.run as run_module
+import temporal_torchrl.runs.directory as run_module
 from temporal_torchrl.data import episode_rows
-from temporal_torchrl.training import (
-    MetricWindow,
-    RunDirectory,
-    RunLockedError,
-    rng_state,
-    set_rng_state,
-)
+from temporal_torchrl.runs import RunDirectory, RunLockedError
+from temporal_torchrl.training import MetricWindow, rng_state, set_rng_state
 
 ROW = {"episode": 1, "env_steps": 20, "success": 0, "return": -20.0, "mean_vlm_reward": 0.5,
        "stage": 1}

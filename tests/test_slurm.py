@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from test_recipe import QUICK, RECIPES, episode_rows
 
-from temporal_torchrl.training import RunDirectory
+from temporal_torchrl.runs import RunDirectory
 
 
 def _no_cluster() -> str | None:

@@ -11,7 +11,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from test_recipe import QUICK, RECIPES
 
-from temporal_torchrl.training.config import threads_per_job
+from temporal_torchrl.runs import threads_per_job
 
 STUDIES = {  # study: (presets, protocol, runs)
     "table_5_2": ("furl,p2,p3,d3", "stage1", 96),
@@ -115,8 +115,7 @@ def test_two_job_joblib_sweep_runs_resumes_and_reports(tmp_path):
 
 
 def test_a_sweep_job_resumes_restarts_or_leaves_alone_what_it_finds(tmp_path, capsys):
-    from temporal_torchrl.training import RunDirectory
-    from temporal_torchrl.training.config import run_directory, sweep_job_config
+    from temporal_torchrl.runs import RunDirectory, run_directory, sweep_job_config
 
     cfg = hydra_config(f"hydra.sweep.dir={tmp_path}", "encoder.name=state")
     fresh = sweep_job_config(cfg, cfg.hydra)

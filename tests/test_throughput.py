@@ -9,7 +9,8 @@ from test_recipe import config, episode_rows
 
 from temporal_torchrl.encoders import load_encoder
 from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
-from temporal_torchrl.training import RunDirectory, factories
+from temporal_torchrl.runs import RunDirectory
+from temporal_torchrl.training import factories
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

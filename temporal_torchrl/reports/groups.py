@@ -6,7 +6,7 @@ come from its ``episodes.csv``, one row per finished episode, which a killed or 
 run has too; ``summary.json`` is there only once the run has finished.
 
 Runs are grouped into *configurations*: runs whose configs are equal once the seed, the task and
-the keys about the process that ran them (:data:`PROCESS_KEYS`) are left out. Seeds of one
+the keys about the process that ran them (:data:`NON_CONFIGURATION_KEYS`) are left out. Seeds of one
 configuration are averaged; runs that differ in anything else never are.
 
 Example:
@@ -26,7 +26,13 @@ from pathlib import Path
 from typing import Any
 
 from temporal_torchrl.envs import EVALUATION_TASKS
-from temporal_torchrl.runs import has_vlm_reward, none_or_name
+from temporal_torchrl.runs import (
+    DEVICE_KEYS,
+    PROCESS_KEYS,
+    RESUMABLE_KEYS,
+    has_vlm_reward,
+    none_or_name,
+)
 from temporal_torchrl.runs.layout import (
     CONFIG_FILE,
     EPISODES_FILE,
@@ -35,15 +41,13 @@ from temporal_torchrl.runs.layout import (
     protocol_name,
 )
 
-#: Config keys about the process that ran a run, not about the run: where it wrote, whether it
-#: resumed, when it stopped, its progress bar and threads, its episode target and checkpoint
-#: interval (a run extended with ``train.episodes`` is the same run, longer), the devices,
-#: compilation, and the logger. Runs that differ only in these (and the seed) are one
-#: configuration.
-PROCESS_KEYS = ("output_dir", "resume", "overwrite", "train.stop_after_episodes",
-                "train.progress", "train.threads", "train.episodes", "train.checkpoint_every",
-                "encoder.device", "train.device", "replay_buffer.device")
-#: Key prefixes left out like :data:`PROCESS_KEYS` (``logger.*``, ``compile.*``).
+#: Config keys that do not make two runs different configurations: those about the process
+#: that ran a run (where it wrote, whether it resumed, when it stopped, its progress bar and
+#: threads), the keys a resume may extend (a run extended with ``train.episodes`` is the same
+#: run, longer), the devices, and, below, compilation and the logger. Runs that differ only in
+#: these (and the seed) are one configuration.
+NON_CONFIGURATION_KEYS = (*PROCESS_KEYS, *RESUMABLE_KEYS, *DEVICE_KEYS)
+#: Key prefixes left out like :data:`NON_CONFIGURATION_KEYS` (``logger.*``, ``compile.*``).
 PROCESS_PREFIXES = ("logger.", "compile.")
 #: Last key component left out wherever it appears (a sweep launcher's ``runs_dir``).
 PROCESS_LEAVES = ("runs_dir",)
@@ -52,7 +56,7 @@ RUN_KEYS = ("env.seed", "env.task")
 
 def is_process_key(key: str) -> bool:
     """Whether ``key`` (dotted) is about the process rather than the run (see module doc)."""
-    return (key in PROCESS_KEYS or key.startswith(PROCESS_PREFIXES)
+    return (key in NON_CONFIGURATION_KEYS or key.startswith(PROCESS_PREFIXES)
             or key.rsplit(".", 1)[-1] in PROCESS_LEAVES)
 
 

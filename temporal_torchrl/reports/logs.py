@@ -2,7 +2,7 @@
 
 ``recipes/sac_temporal.py`` writes ``metrics.jsonl`` into its run directory whatever
 ``logger.backend`` is (csv, wandb or none); its format is documented in
-:mod:`temporal_torchrl.training.run` (one JSON object per logged point, ``{"step": <env steps>,
+:mod:`temporal_torchrl.runs.directory` (one JSON object per logged point, ``{"step": <env steps>,
 "<key>": <value>, ...}``). A run written before that file existed has only its TorchRL CSVLogger
 files, ``logs/<exp_name>/scalars/<key>.csv`` with lines ``step,value``, which are read instead.
 wandb's files are never read: wandb is a sink for those who watch runs there.
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from temporal_torchrl.training.run import METRICS_FILE, RunDirectory
+from temporal_torchrl.runs import METRICS_FILE, RunDirectory
 
 CSV_LOG_DIR = "logs"
 

@@ -1,21 +1,16 @@
-"""The training recipe's config (``recipes/config.yaml``): validation, run directories, resume.
+"""The training recipe's config (``recipes/config.yaml``): validation, devices, replay capacity.
 
-- :func:`validate_config` stops a run before any work on a bad value, naming the key;
-- :func:`default_run_dir` names a run's directory from what distinguishes it;
-- :func:`resumed_config` continues a run with the config it started with;
-- :func:`sweep_job_config` makes each job of a ``-m`` sweep resumable and sets its threads.
+:func:`validate_config` stops a run before any work on a bad value, naming the key. A run's
+directory, its resume and its sweep jobs are :mod:`temporal_torchrl.runs`' business.
 """
 
 from __future__ import annotations
 
-import copy
 import importlib
 import importlib.util
-import json
-import os
 import re
 import sys
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,18 +20,9 @@ from omegaconf import DictConfig, OmegaConf
 from temporal_torchrl.encoders import ENCODERS
 from temporal_torchrl.envs import TASKS, baseline_text
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
-from temporal_torchrl.training.run import RunDirectory
+from temporal_torchrl.runs import none_or_name
 
 LOGGER_BACKENDS = ("wandb", "csv", "none")
-
-
-#: Expert episodes the thesis preloads in its second stage (protocol=stage2).
-STAGE2_EXPERTS = 50
-
-
-def none_or_name(value: Any) -> str | None:
-    """A reward name from the config, None for null or "none"."""
-    return None if value is None or str(value).lower() == "none" else str(value)
 
 
 def _integer(minimum: int) -> tuple[Callable[[Any], bool], str]:
@@ -229,149 +215,6 @@ def resolve_device(name: str, train_device: str | None = None) -> torch.device:
     if device.type == "cuda" and not torch.cuda.is_available():
         raise ValueError("auto or cpu: torch finds no CUDA GPU on this machine")
     return device
-
-
-#: What a run giving its saved positives to another must share with it: the layout always, the
-#: frames and the encoder when the receiving run embeds them.
-_LAYOUT_KEYS = ("env.task", "env.seed")
-_FRAME_KEYS = ("env.image_size", "env.camera", "env.fast_render", "encoder.name",
-               "encoder.checkpoint", "encoder.options")
-
-
-def check_positives_source(cfg: DictConfig, source_config: dict[str, Any]) -> None:
-    """Raise unless the run in ``train.positives_from`` (its saved ``source_config``) made its
-    positives with this run's task, layout and, when this run has a VLM reward, frames and
-    encoder."""
-    source = OmegaConf.create(source_config)
-    keys = _LAYOUT_KEYS + (_FRAME_KEYS if uses_vlm_reward(cfg) else ())
-    if uses_vlm_reward(cfg) and not uses_vlm_reward(source):
-        raise ValueError(f"config train.positives_from={cfg.train.positives_from!r} is a run "
-                         "without a VLM reward: its positives carry no embeddings. Take them "
-                         "from a run with this run's encoder.")
-    for key in keys:
-        theirs, ours = OmegaConf.select(source, key), OmegaConf.select(cfg, key)
-        if isinstance(theirs, DictConfig):
-            theirs, ours = OmegaConf.to_container(theirs), OmegaConf.to_container(ours)
-        if theirs != ours:
-            raise ValueError(
-                f"config train.positives_from={cfg.train.positives_from!r} was trained with "
-                f"{key}={theirs!r}, this run has {key}={ours!r}: preloaded positives must come "
-                "from the same task, layout (env.seed), frames and encoder. Use a source run "
-                f"with {key}={ours!r}.")
-
-
-def uses_vlm_reward(cfg: DictConfig) -> bool:
-    return (none_or_name(cfg.reward.positional) is not None
-            or none_or_name(cfg.reward.directional) is not None)
-
-
-def default_run_dir(cfg: DictConfig) -> Path:
-    """``runs/<task>/<encoder>_<positional>+<directional>_rho<r>_lambda<l>_<baseline>_<protocol>
-    /seed<s>``: runs that differ in anything a preset or protocol sets (encoder, reward, rho,
-    lambda, baseline, preloaded experts) or in the seed never share a directory (with
-    ``reward.certainty_scaling`` the directional part reads ``<directional>xcertainty``)."""
-    if uses_vlm_reward(cfg):
-        baseline = cfg.reward.baseline
-        if baseline not in ("generic", "tailored"):
-            baseline = re.sub(r"[^A-Za-z0-9]+", "-", baseline).strip("-")[:40] or "text"
-        scaled = "xcertainty" if cfg.reward.certainty_scaling else ""
-        method = (f"{cfg.encoder.name}_{cfg.reward.positional}+{cfg.reward.directional}{scaled}"
-                  f"_rho{cfg.reward.rho:g}_lambda{cfg.reward.lambda_:g}_{baseline}")
-    else:
-        method = "sac"
-    preload = cfg.train.preload_positives
-    protocol = {0: "stage1", STAGE2_EXPERTS: "stage2"}.get(preload, f"preload{preload}")
-    root = Path(cfg.runs_dir) if cfg.runs_dir is not None else Path("runs")
-    return root / cfg.env.task / f"{method}_{protocol}" / f"seed{cfg.env.seed}"
-
-
-def run_directory(cfg: DictConfig) -> Path:
-    """``output_dir``, or (null) :func:`default_run_dir`."""
-    return Path(cfg.output_dir) if cfg.output_dir is not None else default_run_dir(cfg)
-
-
-def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
-    """One job of a ``-m`` sweep: its run directory under the sweep directory, resumed when a
-    checkpoint is there (a re-launched sweep continues its runs, finished ones return at once),
-    restarted when the job died before its first checkpoint, and torch threads set so that
-    parallel jobs share the cores instead of oversubscribing them. A run a live process is
-    writing is left as it is: :func:`train` then stops on its lock (``RunLockedError``)."""
-    cfg = copy.deepcopy(cfg)
-    if cfg.runs_dir is None:
-        cfg.runs_dir = hydra_config.sweep.dir
-    run = RunDirectory(run_directory(cfg))
-    if not cfg.overwrite and not cfg.resume and run.locked_by() is None:
-        if run.has_checkpoint():
-            cfg.resume = True
-        elif run.holds_files():
-            print(f"{run.path}: no checkpoint yet, starting it over")
-            cfg.overwrite = True
-    if cfg.train.threads is None:
-        cfg.train.threads = threads_per_job(hydra_config.launcher)
-    return cfg
-
-
-def threads_per_job(launcher: DictConfig) -> int | None:
-    """Cores / parallel jobs for the joblib launcher (``n_jobs`` -1 or null: one per core);
-    None (torch's default) for the others: Slurm gives each job its own CPUs."""
-    if "n_jobs" not in launcher:
-        return None
-    cores = os.cpu_count() or 1
-    jobs = launcher.n_jobs if launcher.n_jobs not in (None, -1) and launcher.n_jobs > 0 else cores
-    return max(1, cores // min(jobs, cores))
-
-
-#: Keys about this process, not the run (where and how to resume, when to stop, the progress bar,
-#: threads): a resumed run always takes their current values.
-PROCESS_KEYS = ("resume", "overwrite", "output_dir", "runs_dir", "train.stop_after_episodes",
-                "train.progress", "train.threads")
-
-
-#: Keys of the run a resumed run may change when they are given on the command line; every
-#: other value comes from the run's saved config.json.
-RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every")
-
-
-def override_keys(overrides: Sequence[str]) -> set[str]:
-    """The config keys that command-line overrides set (``+``, ``++`` and ``~`` dropped)."""
-    return {override.split("=", 1)[0].lstrip("+~") for override in overrides}
-
-
-def resumed_config(cfg: DictConfig, run_dir: Path,
-                   given_keys: Collection[str] | None = None) -> DictConfig:
-    """The config of the run in ``run_dir``, continued with ``cfg``'s :data:`PROCESS_KEYS`.
-
-    A resumed run must go on with the task, encoder, reward and hyperparameters it started with,
-    whatever the command line's defaults are now; so ``resume=true output_dir=...`` is enough.
-    Of :data:`RESUMABLE_KEYS`, ``cfg``'s values replace the saved ones only for ``given_keys``
-    (the keys set on the command line), or all of them when ``given_keys`` is None (a config
-    built in code). Keys the saved config lacks (added to the recipe after the run started) take
-    ``cfg``'s values.
-    """
-    current = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
-    saved = OmegaConf.merge(current, json.loads((run_dir / "config.json").read_text()))
-    applied = [*PROCESS_KEYS, *(key for key in RESUMABLE_KEYS
-                               if given_keys is None or key in given_keys)]
-    for key in applied:
-        OmegaConf.update(saved, key, OmegaConf.select(cfg, key), force_add=True)
-    saved_values = _flatten(saved)
-    differing = [key for key, value in _flatten(cfg).items()
-                 if key not in applied and saved_values.get(key, value) != value]
-    if differing:
-        print(f"resume: continuing with {run_dir / 'config.json'}; not using the current "
-              f"values of {', '.join(differing)}")
-    return saved
-
-
-def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
-    if isinstance(tree, DictConfig):
-        tree = OmegaConf.to_container(tree, resolve=True)
-    if not isinstance(tree, dict):
-        return {prefix: tree}
-    flat: dict[str, Any] = {}
-    for key, value in tree.items():
-        flat.update(_flatten(value, f"{prefix}.{key}" if prefix else str(key)))
-    return flat
 
 
 def replay_capacity(cfg: DictConfig, expert_rows: int = 0, saved: int | None = None) -> int:

@@ -38,14 +38,10 @@ from temporal_torchrl.envs import (
     make_temporal_reward,
 )
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.runs import reward_options
-from temporal_torchrl.training.config import (
-    check_positives_source,
-    resolve_device,
-)
+from temporal_torchrl.runs import RunDirectory, check_positives_source, reward_options
+from temporal_torchrl.training.config import resolve_device
 from temporal_torchrl.training.logger import RunLogger
 from temporal_torchrl.training.relay import RelayExploration, RelayPolicy, RelaySchedule
-from temporal_torchrl.training.run import RunDirectory
 from temporal_torchrl.training.trainer import RewardHeadTrainer
 
 #: Added to env.seed for the relay agent's initial weights.

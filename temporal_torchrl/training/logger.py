@@ -9,7 +9,7 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.record.loggers import Logger
 
-from temporal_torchrl.training.run import RunDirectory
+from temporal_torchrl.runs import RunDirectory
 
 
 class MetricWindow:
