@@ -25,6 +25,7 @@ what reports read) and the same in ``logs/`` (CSV logger) or ``wandb/``.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Collection
 
@@ -36,8 +37,6 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from temporal_torchrl.data import episode_rows
-from temporal_torchrl.envs import get_task
-from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, episode_success, ras, tt50s, ttfs
 from temporal_torchrl.runs import (
     RunDirectory,
     RunLockedError,
@@ -48,20 +47,19 @@ from temporal_torchrl.runs import (
     uses_vlm_reward,
 )
 from temporal_torchrl.training import (
+    EpisodeAssembler,
     MetricWindow,
+    TrainingProgress,
+    TrainingState,
+    episode_row,
     factories,
     log_metrics,
+    progress_from,
     reward_statistics,
-    rng_state,
+    run_summary,
     set_rng_state,
 )
 from temporal_torchrl.training.config import replay_capacity, validate_config
-from temporal_torchrl.training.relay import RelayExploration
-
-# What an episode keeps from each step (pixels never reach the buffer).
-STEP_KEYS = ("observation", "embedding", "action", "success", ("next", "observation"),
-             ("next", "embedding"), ("next", "success"), ("next", "terminated"),
-             ("next", "task_reward"), ("next", "vlm_reward"))
 
 
 def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | None:
@@ -83,9 +81,9 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     if cfg.resume:
         cfg = resumed_config(cfg, run.path, given_keys)
         validate_config(cfg)  # the saved config, continued, is the one that runs
-    state = run.resume_state() if cfg.resume else None
-    if state is not None and state["episode"] >= cfg.train.episodes and run.summary():
-        print(f"{run.path}: already complete ({state['episode']} episodes)")
+    checkpoint = run.resume_state() if cfg.resume else None
+    if checkpoint is not None and checkpoint["episode"] >= cfg.train.episodes and run.summary():
+        print(f"{run.path}: already complete ({checkpoint['episode']} episodes)")
         return run.summary()
     torch.manual_seed(cfg.env.seed)
 
@@ -100,185 +98,137 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     finetune = reward is not None and (reward.positional_heads is not None
                                        or reward.directional_heads is not None)
     preloaded, goal_image = (factories.make_preloaded_positives(cfg, encoder, finetune)
-                             if state is None else ([], state["goal_image"]))
+                             if checkpoint is None else ([], checkpoint["goal_image"]))
 
     # ---- SAC, replay buffer, reward-head trainer
     actor, qvalue = factories.make_sac_agent(cfg, env)
     sac_loss, target_updater, sac_optimizer = factories.make_sac_loss(
         cfg, actor, qvalue, env.action_spec.shape[-1])
     update_sac = factories.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
-    expert_rows = (state["expert_rows"] if state is not None
+    expert_rows = (checkpoint["expert_rows"] if checkpoint is not None
                    else sum(len(rows) for rows in preloaded))
-    capacity = replay_capacity(cfg, expert_rows,
-                               saved=state["buffer_capacity"] if state is not None else None)
-    buffer = factories.make_replay_buffer(cfg, capacity, reward)
-    embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
-    trainer = None
-    if finetune:
-        trainer = factories.make_reward_trainer(cfg, reward, goal_image, buffer)
+    buffer = factories.make_replay_buffer(cfg, replay_capacity(
+        cfg, expert_rows, saved=checkpoint["buffer_capacity"] if checkpoint else None), reward)
+    trainer = factories.make_reward_trainer(cfg, reward, goal_image, buffer) if finetune else None
 
-    # ---- fresh start or resume
-    if state is None:
+    # ---- fresh start, or resume: the buffer refilled, then modules and counters restored
+    if checkpoint is None:
         run.create(config=OmegaConf.to_container(cfg, resolve=True))
         for index, rows in enumerate(preloaded):
             buffer.extend(rows)
             run.save_replay_episode(index, rows)
-        episode, env_steps, inserted, updates = 0, 0, len(preloaded), 0
-        successes, last_metrics, credits = [], {}, {"sac": 0.0, "reward": 0.0}
+        progress = TrainingProgress(inserted=len(preloaded))
     else:
-        sac_loss.load_state_dict(state["sac_loss"])
-        sac_optimizer.load_state_dict(state["sac_optimizer"])
-        if reward is not None:
-            reward.load_state_dict(state["reward"])
-        if trainer is not None:
-            trainer.load_state_dict(state["trainer"])
-        episode, env_steps, inserted = state["episode"], state["env_steps"], state["inserted"]
-        updates, last_metrics = state["updates"], state["last_metrics"]
-        successes = list(state["successes"])
-        credits = dict(state.get("credits", {"sac": 0.0, "reward": 0.0}))
-        for rows in run.replay_episodes(inserted):
+        progress = progress_from(checkpoint)
+        for rows in run.replay_episodes(progress.inserted):
             buffer.extend(rows)
     relay = (factories.make_relay(cfg, env, actor, buffer.num_positive_states)
              if cfg.train.relay and trainer is not None else None)
-    if relay is not None and state is not None:
-        relay.load_state_dict(state["relay"])
-    print(f"relay exploration: {describe_relay(cfg, relay)}")
+    state = TrainingState(progress, sac_loss=sac_loss, sac_optimizer=sac_optimizer,
+                          reward=reward, trainer=trainer, relay=relay, goal_image=goal_image,
+                          buffer_capacity=buffer.capacity, expert_rows=expert_rows,
+                          preloaded=buffer.num_permanent_episodes)
+    if checkpoint is not None:
+        state.load_state_dict(checkpoint)
+    print(f"relay exploration: {factories.describe_relay(cfg, relay)}")
     collector = factories.make_collector(cfg, env, relay.policy if relay else actor,
-                                         max(0, cfg.train.random_steps - env_steps))
-    random_until = env_steps + collector.init_random_frames
-    if state is not None:  # after every random draw the build makes
-        set_rng_state(state["rng"])
+                                         max(0, cfg.train.random_steps - progress.env_steps))
+    random_until = progress.env_steps + collector.init_random_frames
+    if checkpoint is not None:  # after every random draw the build makes
+        set_rng_state(checkpoint["rng"])
     logger = factories.make_logger(cfg, run.path)
     metrics = MetricWindow()
+    embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
+    stage = lambda: 2 if buffer.has_positives else 1  # noqa: E731  (the finetuning's stage)
+    episodes = EpisodeAssembler(cfg.env.num_envs, stage())
+
+    def log_training_metrics() -> None:
+        progress.last_metrics = metrics.flush() | {
+            "train/stage": float(stage()), "train/positive_states": buffer.num_positive_states}
+        log_metrics(logger, progress.last_metrics, progress.env_steps)
+
+    def update(env_steps: int) -> None:
+        """The reward-head and SAC updates ``env_steps`` new env steps are owed."""
+        sac_updates, reward_updates = progress.credits.add(
+            env_steps, cfg.train.utd_ratio,
+            cfg.train.reward_updates_per_step if trainer is not None else 0)
+        for _ in range(reward_updates):
+            metrics.add("reward", trainer.update())
+        for _ in range(sac_updates):
+            batch = buffer.sample()  # rewards relabelled with the current heads
+            relay_batch = (relay.task_reward_batch(batch)
+                           if relay is not None and relay.schedule.active else None)
+            metrics.add("sac", update_sac(batch))
+            if relay_batch is not None:  # the relay agent learns from the same batches
+                metrics.add("relay", relay.update(relay_batch))
+            metrics.add("relabelled", reward_statistics(batch["next"]))
+            progress.updates += 1
+            if progress.updates % cfg.logger.log_every == 0:
+                log_training_metrics()
+
+    def finish_episode(index: int) -> None:
+        """Env ``index``'s episode ended: labelled and inserted, saved, its row logged."""
+        trajectory, ran_in = episodes.pop(index)
+        rows = episode_rows(trajectory, embedding_dtype=embedding_dtype)
+        buffer.extend(rows)
+        run.save_replay_episode(progress.inserted, rows)
+        progress.inserted += 1
+        progress.episode += 1
+        row = episode_row(trajectory, progress.episode, progress.env_steps, ran_in)
+        progress.successes.append(bool(row["success"]))
+        if row["success"] and cfg.train.save_positives:
+            run.save_positive_episode(progress.episode, rows)
+        run.append_episode(row)
+        logged = {f"train/{key}": float(row[key])
+                  for key in ("success", "return", "mean_vlm_reward", "stage")}
+        if relay is not None:
+            logged["train/relay_fraction"] = (relay.schedule.episode_relay_steps(index)
+                                              / len(trajectory))
+        log_metrics(logger, logged, progress.env_steps)
+        episodes.begin(index, stage())
 
     # ---- training loop: one vector step of env.num_envs envs, then its updates
-    num_envs, start_time, start_steps = cfg.env.num_envs, time.perf_counter(), env_steps
-    bar = tqdm(total=cfg.train.episodes, initial=episode, disable=not cfg.train.progress,
-               desc="episodes")
-    stages = [2 if buffer.has_positives else 1] * num_envs  # each env's episode's stage
-    steps = [[] for _ in range(num_envs)]
+    num_envs, start_time, start_steps = cfg.env.num_envs, time.perf_counter(), progress.env_steps
+    bar = tqdm(total=cfg.train.episodes, initial=progress.episode,
+               disable=not cfg.train.progress, desc="episodes")
     for data in collector:
-        data = data.reshape(num_envs)
-        for index in range(num_envs):
-            steps[index].append(data[index].select(*STEP_KEYS, strict=False))
-        env_steps += num_envs
-        if env_steps > cfg.train.random_steps and buffer.num_transitions > 0:
-            # The update-to-data ratio holds at any num_envs; fractions carry over.
-            credits["reward"] += num_envs * cfg.train.reward_updates_per_step * (
-                trainer is not None)
-            credits["sac"] += num_envs * cfg.train.utd_ratio
-            while credits["reward"] >= 1:
-                metrics.add("reward", trainer.update())
-                credits["reward"] -= 1
-            while credits["sac"] >= 1:
-                batch = buffer.sample()  # rewards relabelled with the current heads
-                relay_batch = (relay.task_reward_batch(batch)
-                               if relay is not None and relay.schedule.active else None)
-                metrics.add("sac", update_sac(batch))
-                if relay_batch is not None:  # the relay agent learns from the same batches
-                    metrics.add("relay", relay.update(relay_batch))
-                metrics.add("relabelled", reward_statistics(batch["next"]))
-                credits["sac"] -= 1
-                updates += 1
-                if updates % cfg.logger.log_every == 0:
-                    last_metrics = metrics.flush()
-                    last_metrics.update({"train/stage": 2.0 if buffer.has_positives else 1.0,
-                                         "train/positive_states": buffer.num_positive_states})
-                    log_metrics(logger, last_metrics, env_steps)
-        ended = data["next", "done"].reshape(num_envs).nonzero().reshape(-1).tolist()
+        progress.env_steps += num_envs
+        if progress.env_steps > cfg.train.random_steps and buffer.num_transitions > 0:
+            update(num_envs)
+        ended = episodes.add(data)
         if relay is not None:
-            relay.schedule.advance(ended, acted=env_steps > random_until)
+            relay.schedule.advance(ended, acted=progress.env_steps > random_until)
         if not ended:
             continue
-
-        # ---- episode ends (in env order): label + insert, log, checkpoint
-        checkpointed_before = episode // cfg.train.checkpoint_every
-        for index in ended[:cfg.train.episodes - episode]:
-            trajectory, steps[index] = torch.stack(steps[index]), []
-            rows = episode_rows(trajectory, embedding_dtype=embedding_dtype)
-            buffer.extend(rows)
-            run.save_replay_episode(inserted, rows)
-            inserted += 1
-            episode += 1
-            success = episode_success(trajectory["next", "success"])
-            successes.append(success)
-            if success and cfg.train.save_positives:
-                run.save_positive_episode(episode, rows)
-            task_rewards = trajectory.get(("next", "task_reward"),
-                                          trajectory["next", "success"].float() - 1.0)
-            vlm_rewards = trajectory.get(("next", "vlm_reward"), torch.zeros_like(task_rewards))
-            row = {"episode": episode, "env_steps": env_steps, "success": int(success),
-                   "return": float(task_rewards.sum()),
-                   "mean_vlm_reward": float(vlm_rewards.mean()), "stage": stages[index]}
-            run.append_episode(row)
-            episode_metrics = {f"train/{key}": float(row[key]) for key in
-                               ("success", "return", "mean_vlm_reward", "stage")}
-            if relay is not None:
-                episode_metrics["train/relay_fraction"] = (
-                    relay.schedule.episode_relay_steps(index) / len(trajectory))
-            log_metrics(logger, episode_metrics, env_steps)
-            stages[index] = 2 if buffer.has_positives else 1
+        checkpointed_before = progress.episode // cfg.train.checkpoint_every
+        for index in ended[:cfg.train.episodes - progress.episode]:  # in env order
+            finish_episode(index)
             bar.update(1)
         if relay is not None:
             relay.schedule.end_if_enough(buffer.num_positive_states)
-        elapsed = time.perf_counter() - start_time
-        bar.set_postfix(success_rate=f"{sum(successes) / len(successes):.2f}",
-                        steps_per_s=f"{(env_steps - start_steps) / max(elapsed, 1e-9):.0f}")
-        if (episode // cfg.train.checkpoint_every > checkpointed_before
-                or episode >= cfg.train.episodes):
-            run.save_checkpoint({
-                "sac_loss": sac_loss.state_dict(), "sac_optimizer": sac_optimizer.state_dict(),
-                "reward": reward.state_dict() if reward is not None else {},
-                "trainer": trainer.state_dict() if trainer is not None else {},
-                "goal_image": goal_image if trainer is not None else None,
-                "episode": episode, "env_steps": env_steps, "inserted": inserted,
-                "updates": updates, "credits": credits, "last_metrics": last_metrics,
-                "successes": successes, "rng": rng_state(), "buffer_capacity": buffer.capacity,
-                "preloaded": buffer.num_permanent_episodes, "expert_rows": expert_rows,
-                "relay": relay.state_dict() if relay is not None else {}})
-        stopped = (cfg.train.stop_after_episodes is not None
-                   and episode >= cfg.train.stop_after_episodes)
-        if episode >= cfg.train.episodes or stopped:
+        steps_per_second = (progress.env_steps - start_steps) / (time.perf_counter() - start_time)
+        bar.set_postfix(success_rate=f"{sum(progress.successes) / len(progress.successes):.2f}",
+                        steps_per_s=f"{steps_per_second:.0f}")
+        done = progress.episode >= cfg.train.episodes
+        if progress.episode // cfg.train.checkpoint_every > checkpointed_before or done:
+            run.save_checkpoint(state.state_dict())
+        if done or progress.episode >= (cfg.train.stop_after_episodes or math.inf):
             break
     bar.close()
     collector.shutdown()
-    if episode < cfg.train.episodes:
+    if progress.episode < cfg.train.episodes:
         return None  # stopped early, as if killed (train.stop_after_episodes)
     if metrics.pending:  # the last window, shorter than logger.log_every updates
-        last_metrics = metrics.flush()
-        last_metrics.update({"train/stage": 2.0 if buffer.has_positives else 1.0,
-                             "train/positive_states": buffer.num_positive_states})
-        log_metrics(logger, last_metrics, env_steps)
+        log_training_metrics()
 
-    # ---- summary
-    elapsed = time.perf_counter() - start_time
-    budget = get_task(cfg.env.task).ras_budget
-    window = min(150, budget) if budget else 150
-    summary = {
-        "ttfs": ttfs(successes), "tt50s": tt50s(successes), "horizon": DEFAULT_HORIZON,
-        "ras": {"value": ras(successes, budget, window) if budget else None,
-                "budget": budget, "window": window},
-        "episodes": episode, "env_steps": env_steps, "successes": int(sum(successes)),
-        "steps_per_second": (env_steps - start_steps) / max(elapsed, 1e-9),
-        "encoder": cfg.encoder.name if encoder is not None else None,
-        "updates": updates, "last_metrics": last_metrics,
-        "relay_steps": relay.schedule.total_relay_steps if relay is not None else 0,
-        "config": OmegaConf.to_container(cfg, resolve=True),
-    }
+    summary = run_summary(
+        cfg, progress, encoder=cfg.encoder.name if encoder is not None else None,
+        steps_per_second=(progress.env_steps - start_steps) / (time.perf_counter() - start_time),
+        relay_steps=relay.schedule.total_relay_steps if relay is not None else 0)
     run.write_summary(summary)
     log_metrics(logger, {f"summary/{key}": float(summary[key]) for key in ("ttfs", "tt50s")},
-                env_steps)
+                progress.env_steps)
     return summary
-
-
-def describe_relay(cfg: DictConfig, relay: RelayExploration | None) -> str:
-    if relay is None:
-        return ("off (train.relay=false)" if not cfg.train.relay
-                else "off (no finetuned reward heads to relay for)")
-    if not relay.schedule.active:
-        return f"off (the positives already reach train.relay_threshold={relay.schedule.threshold})"
-    return (f"on until {relay.schedule.threshold:,} positive states (periods "
-            f"{list(cfg.train.relay_periods)}, noise {cfg.train.relay_noise})")
 
 
 @hydra.main(version_base=None, config_path=".", config_name="config")

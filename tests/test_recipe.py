@@ -10,6 +10,7 @@ import sac_temporal
 import torch
 from hydra import compose, initialize_config_dir
 
+import temporal_torchrl.training.episodes as episodes_module
 from temporal_torchrl.runs import RunDirectory, default_run_dir, override_keys, resumed_config
 from temporal_torchrl.training import factories
 
@@ -104,7 +105,7 @@ def test_save_positives_writes_each_successful_episode_whole(tmp_path, monkeypat
     """Episodes 1 and 3 count as successes here (a random policy does not succeed in 20 steps):
     their stored rows, whole, are what positives/ receives."""
     outcomes = iter([True, False, True])
-    monkeypatch.setattr(sac_temporal, "episode_success", lambda success: next(outcomes))
+    monkeypatch.setattr(episodes_module, "episode_success", lambda success: next(outcomes))
     sac_temporal.train(config(tmp_path, "train.save_positives=true"))
     run = RunDirectory(tmp_path / "run")
     assert sorted(path.name for path in (run.path / "positives").iterdir()) == [

@@ -1,21 +1,38 @@
 """The training loop's parts: the recipe's factories, the reward-head trainer, relay exploration,
 the metrics logger, the random generators' state, and the recipe config's validation."""
 
+from temporal_torchrl.training.episodes import STEP_KEYS, EpisodeAssembler, episode_row
 from temporal_torchrl.training.logger import (
     MetricWindow,
     RunLogger,
     log_metrics,
     reward_statistics,
 )
-from temporal_torchrl.training.state import rng_state, set_rng_state
+from temporal_torchrl.training.state import (
+    TrainingProgress,
+    TrainingState,
+    UpdateCredits,
+    progress_from,
+    rng_state,
+    set_rng_state,
+)
+from temporal_torchrl.training.summary import run_summary
 from temporal_torchrl.training.trainer import RewardHeadTrainer
 
 __all__ = [
+    "STEP_KEYS",
+    "EpisodeAssembler",
     "MetricWindow",
     "RewardHeadTrainer",
     "RunLogger",
+    "TrainingProgress",
+    "TrainingState",
+    "UpdateCredits",
+    "episode_row",
     "log_metrics",
+    "progress_from",
     "reward_statistics",
     "rng_state",
+    "run_summary",
     "set_rng_state",
 ]

@@ -147,6 +147,17 @@ def saved_positives(cfg: DictConfig, count: int) -> list[TensorDict]:
     return list(source.positive_episodes(count))
 
 
+def describe_relay(cfg: DictConfig, relay: RelayExploration | None) -> str:
+    """One line: whether relay exploration runs, and until when."""
+    if relay is None:
+        return ("off (train.relay=false)" if not cfg.train.relay
+                else "off (no finetuned reward heads to relay for)")
+    if not relay.schedule.active:
+        return f"off (the positives already reach train.relay_threshold={relay.schedule.threshold})"
+    return (f"on until {relay.schedule.threshold:,} positive states (periods "
+            f"{list(cfg.train.relay_periods)}, noise {cfg.train.relay_noise})")
+
+
 def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor,
                positive_states: int) -> RelayExploration:
     """FuRL's relay exploration (``train.relay*``): a second SAC agent on the sparse task reward,

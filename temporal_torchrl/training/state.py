@@ -1,12 +1,124 @@
-"""What a training run resumes from, beyond its modules' state dicts: the random generators."""
+"""Everything a training run resumes from, as one object: :class:`TrainingState`.
+
+A checkpoint (``RunDirectory.save_checkpoint``) is :meth:`TrainingState.state_dict`: the SAC loss
+(actor, critics, targets, temperature) and its optimizer, the reward (heads, certainty
+references), the reward-head trainer (optimizers, stage), the relay agent and its schedule, the
+goal image s_g, the counters (:class:`TrainingProgress`, update credits included), the replay's
+capacity and preloaded rows, and the torch, Python and NumPy random generators. The generators are
+restored apart (:func:`set_rng_state`), after everything the build draws, so a resumed run goes on
+with the numbers the uninterrupted one would have drawn.
+"""
 
 from __future__ import annotations
 
 import random
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
+from torch import nn
+
+
+@dataclass
+class UpdateCredits:
+    """Updates owed to the env steps taken: ``rate`` updates per env step at any number of envs,
+    fractions carried over (``utd_ratio=0.5``: one update every 2 steps)."""
+
+    sac: float = 0.0
+    reward: float = 0.0
+
+    def add(self, env_steps: int, sac_rate: float, reward_rate: float) -> tuple[int, int]:
+        """Credit ``env_steps`` steps; returns the whole (SAC, reward-head) updates now due,
+        which are debited."""
+        self.sac += env_steps * sac_rate
+        self.reward += env_steps * reward_rate
+        due = int(self.sac), int(self.reward)
+        self.sac -= due[0]
+        self.reward -= due[1]
+        return due
+
+
+@dataclass
+class TrainingProgress:
+    """The run's counters: finished episodes, env steps, episodes inserted into the replay
+    (the preloaded ones included), SAC updates, each episode's success, the last logged training
+    metrics and the update credits."""
+
+    episode: int = 0
+    env_steps: int = 0
+    inserted: int = 0
+    updates: int = 0
+    successes: list[bool] = field(default_factory=list)
+    last_metrics: dict[str, float] = field(default_factory=dict)
+    credits: UpdateCredits = field(default_factory=UpdateCredits)
+
+
+class TrainingState:
+    """The modules and counters of a run, saved and restored together (see the module doc).
+
+    Args:
+        progress: the counters.
+        sac_loss, sac_optimizer: TorchRL's ``SACLoss`` (it holds the actor and the critics) and
+            its optimizer.
+        reward, trainer, relay: the VLM reward, the reward-head trainer and the relay
+            exploration, each None when the run has none.
+        goal_image: s_g (None without finetuned heads).
+        buffer_capacity, expert_rows: the replay's rows and the preloaded positives' share.
+    """
+
+    def __init__(self, progress: TrainingProgress, *, sac_loss: nn.Module,
+                 sac_optimizer: torch.optim.Optimizer, reward: nn.Module | None = None,
+                 trainer: Any | None = None, relay: Any | None = None,
+                 goal_image: torch.Tensor | None = None, buffer_capacity: int = 0,
+                 expert_rows: int = 0, preloaded: int = 0) -> None:
+        self.progress = progress
+        self.sac_loss, self.sac_optimizer = sac_loss, sac_optimizer
+        self.reward, self.trainer, self.relay = reward, trainer, relay
+        self.goal_image = goal_image
+        self.buffer_capacity, self.expert_rows, self.preloaded = (buffer_capacity, expert_rows,
+                                                                  preloaded)
+
+    def state_dict(self) -> dict[str, Any]:
+        """The checkpoint: plain tensors and values that ``torch.load(weights_only=True)``
+        reads back."""
+        progress = self.progress
+        return {
+            "sac_loss": self.sac_loss.state_dict(),
+            "sac_optimizer": self.sac_optimizer.state_dict(),
+            "reward": self.reward.state_dict() if self.reward is not None else {},
+            "trainer": self.trainer.state_dict() if self.trainer is not None else {},
+            "relay": self.relay.state_dict() if self.relay is not None else {},
+            "goal_image": self.goal_image if self.trainer is not None else None,
+            "episode": progress.episode, "env_steps": progress.env_steps,
+            "inserted": progress.inserted, "updates": progress.updates,
+            "successes": list(progress.successes), "last_metrics": progress.last_metrics,
+            "credits": {"sac": progress.credits.sac, "reward": progress.credits.reward},
+            "buffer_capacity": self.buffer_capacity, "expert_rows": self.expert_rows,
+            "preloaded": self.preloaded, "rng": rng_state()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore the modules and the counters (the random generators: :func:`set_rng_state`
+        with ``state["rng"]``, once the build's own draws are done)."""
+        self.sac_loss.load_state_dict(state["sac_loss"])
+        self.sac_optimizer.load_state_dict(state["sac_optimizer"])
+        for name in ("reward", "trainer", "relay"):
+            module = getattr(self, name)
+            if module is not None:
+                module.load_state_dict(state[name])
+        restored = progress_from(state)
+        for name in vars(restored):  # in place: the loop holds this progress object
+            setattr(self.progress, name, getattr(restored, name))
+
+
+def progress_from(state: dict[str, Any]) -> TrainingProgress:
+    """The counters of a checkpoint (:meth:`TrainingState.state_dict`)."""
+    credits = state.get("credits", {})
+    return TrainingProgress(
+        episode=state["episode"], env_steps=state["env_steps"], inserted=state["inserted"],
+        updates=state["updates"], successes=list(state["successes"]),
+        last_metrics=dict(state["last_metrics"]),
+        credits=UpdateCredits(sac=credits.get("sac", 0.0), reward=credits.get("reward", 0.0)))
 
 
 def rng_state() -> dict[str, Any]:

@@ -1,0 +1,32 @@
+"""A finished run's ``summary.json``: the thesis's scores and how the run went."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from temporal_torchrl.envs import get_task
+from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, ras, tt50s, ttfs
+from temporal_torchrl.training.state import TrainingProgress
+
+#: RAS's running-average window (thesis 5.1), shortened to a budget below it.
+RAS_WINDOW = 150
+
+
+def run_summary(cfg: DictConfig, progress: TrainingProgress, *, steps_per_second: float,
+                encoder: str | None, relay_steps: int) -> dict[str, Any]:
+    """TTFS and TT50S (the horizon when never reached), RAS with the task's episode budget
+    (None until the run has reached it), the counters, the throughput, the last training
+    metrics and the resolved config."""
+    successes = progress.successes
+    budget = get_task(cfg.env.task).ras_budget
+    window = min(RAS_WINDOW, budget) if budget else RAS_WINDOW
+    return {
+        "ttfs": ttfs(successes), "tt50s": tt50s(successes), "horizon": DEFAULT_HORIZON,
+        "ras": {"value": ras(successes, budget, window) if budget else None,
+                "budget": budget, "window": window},
+        "episodes": progress.episode, "env_steps": progress.env_steps,
+        "successes": int(sum(successes)), "steps_per_second": steps_per_second,
+        "encoder": encoder, "updates": progress.updates, "last_metrics": progress.last_metrics,
+        "relay_steps": relay_steps, "config": OmegaConf.to_container(cfg, resolve=True)}
