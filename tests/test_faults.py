@@ -21,7 +21,8 @@ from pathlib import Path
 import pytest
 import sac_temporal
 import torch
-from test_recipe import RECIPES, config, episode_rows
+from helpers import RECIPES, config
+from helpers import episode_csv_rows as episode_rows
 
 import temporal_torchrl.runs.directory as run_module
 from temporal_torchrl.runs import RunDirectory, RunLockedError, UnreadableRunFile
@@ -236,7 +237,7 @@ def test_a_second_process_stops_at_once_and_a_killed_holder_leaves_no_stale_lock
 def test_a_sweep_job_leaves_a_run_a_live_job_writes_alone(tmp_path):
     """Seed 0's run is locked (as by a job of an earlier launch still running): its job says so
     and ends cleanly, seed 1's runs, and the sweep succeeds."""
-    from test_recipe import QUICK
+    from helpers import QUICK
 
     sweep = tmp_path / "sweep"
     locked = RunDirectory(sweep / "drawer-open" / "state_furl+d3_rho1_lambda4_generic_stage1"

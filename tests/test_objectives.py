@@ -123,7 +123,7 @@ def test_directional_loss_matches_thesis_terms(variant):
 def test_finetuning_batches_never_hold_the_reset_frame():
     """s_0 (step 0) is the same image in every episode of a fixed layout: it must be neither a
     positive nor a negative, and the directional loss never sees its zero direction."""
-    from test_replay import make_episode
+    from helpers import make_episode
 
     buffer = EpisodeReplayBuffer(capacity=300, history=2)
     buffer.extend(episode_rows(make_episode(0, 20)))
@@ -163,7 +163,7 @@ def test_directional_release_option_scores_contrast_at_plain_position():
 
 
 def test_stage_switch_follows_the_first_positive_episode():
-    from test_replay import make_episode
+    from helpers import make_episode
 
     buffer = EpisodeReplayBuffer(capacity=300, history=2)
     reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional="furl",

@@ -6,9 +6,10 @@ import csv
 import pytest
 import sac_temporal
 import torch
+from helpers import config
+from helpers import episode_csv_rows as episode_rows
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
-from test_recipe import config, episode_rows
 from torchrl.data import Bounded
 
 from temporal_torchrl.runs import RunDirectory

@@ -3,6 +3,7 @@ labels, finetuning groups, the relabelling transform, TorchRL's dumps/loads, mem
 
 import pytest
 import torch
+from helpers import D, insert, make_episode, marker
 from tensordict import TensorDict
 
 from temporal_torchrl.data import (
@@ -13,35 +14,6 @@ from temporal_torchrl.data import (
     goal_image_embedding,
     transition_index,
 )
-
-D = 4
-
-
-def make_episode(episode: int, steps: int, successes=(), dim: int = D) -> TensorDict:
-    """An episode whose state t has embedding and observation all equal to 100 * episode + t."""
-    states = (100.0 * episode + torch.arange(steps + 1, dtype=torch.float32)).unsqueeze(-1)
-    success = torch.zeros(steps + 1, 1, dtype=torch.bool)
-    for t in successes:  # success after transition t
-        success[t + 1] = True
-    return TensorDict({
-        "observation": states.expand(-1, 39)[:-1].clone(),
-        "embedding": states.expand(-1, dim)[:-1].clone(),
-        "action": torch.rand(steps, 4),
-        "success": success[:-1],
-        "next": {"observation": states.expand(-1, 39)[1:].clone(),
-                 "embedding": states.expand(-1, dim)[1:].clone(),
-                 "success": success[1:],
-                 "terminated": torch.zeros(steps, 1, dtype=torch.bool)},
-    }, [steps])
-
-
-def marker(values: torch.Tensor) -> torch.Tensor:
-    return values[..., 0]
-
-
-def insert(buffer: EpisodeReplayBuffer, episode: int, steps: int, successes=(), **kwargs):
-    """Insert make_episode(episode, steps, successes) into ``buffer``; returns its rows."""
-    return buffer.extend(episode_rows(make_episode(episode, steps, successes, **kwargs)))
 
 
 def all_transitions(buffer: EpisodeReplayBuffer) -> TensorDict:

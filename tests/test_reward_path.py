@@ -4,8 +4,8 @@ see the same rewards for the same stored embeddings, checked value by value."""
 import sac_temporal
 import torch
 import torch.nn.functional as F
+from helpers import config
 from tensordict import TensorDict
-from test_recipe import config
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows, transition_index
 from temporal_torchrl.objectives import PositionalRankingLoss

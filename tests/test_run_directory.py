@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from test_replay import make_episode
+from helpers import make_episode
 
 import temporal_torchrl.runs.directory as run_module
 from temporal_torchrl.data import episode_rows

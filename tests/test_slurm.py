@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 
 import pytest
-from test_recipe import QUICK, RECIPES, episode_rows
+from helpers import QUICK, RECIPES
+from helpers import episode_csv_rows as episode_rows
 
 from temporal_torchrl.runs import RunDirectory
 

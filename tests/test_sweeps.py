@@ -7,9 +7,9 @@ import subprocess
 import sys
 
 import pytest
+from helpers import QUICK, RECIPES
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
-from test_recipe import QUICK, RECIPES
 
 from temporal_torchrl.runs import threads_per_job
 
@@ -71,7 +71,7 @@ def test_joblib_jobs_share_the_cores():
 
 def test_a_finished_run_returns_its_summary_untouched(tmp_path, capsys):
     import sac_temporal
-    from test_recipe import config
+    from helpers import config
 
     summary = sac_temporal.train(config(tmp_path, "train.episodes=2"))
     path = tmp_path / "run" / "summary.json"

@@ -5,7 +5,8 @@ match eager ones."""
 import pytest
 import sac_temporal
 import torch
-from test_recipe import config, episode_rows
+from helpers import config
+from helpers import episode_csv_rows as episode_rows
 
 from temporal_torchrl.encoders import load_encoder
 from temporal_torchrl.envs import make_temporal_env, make_temporal_reward

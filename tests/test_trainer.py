@@ -5,7 +5,7 @@ import copy
 
 import torch
 import torch.nn.functional as F
-from test_replay import make_episode
+from helpers import make_episode
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.rewards import TemporalReward
