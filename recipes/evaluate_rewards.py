@@ -55,6 +55,7 @@ from temporal_torchrl.reward_quality import (
     variant_reward,
 )
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
+from temporal_torchrl.runs import write_json
 from temporal_torchrl.training import factories
 from temporal_torchrl.training.config import import_reward_modules, resolve_device
 
@@ -295,7 +296,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
         if cfg.figures:
             # The trained (or zero-shot) curve first, solid; the untrained one dashed.
             order = list(reversed(states))
-            outputs.plot_reward_curves(
+            outputs.plot_variant_curves(
                 output / "figures" / f"{variant}.png",
                 f"{task.name}: {variant} ({scores.kind}, {order[0]}), {encoder.name}, "
                 "held-out episodes",
@@ -331,7 +332,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
         "rows": rows,
     }
     output.mkdir(parents=True, exist_ok=True)
-    outputs.write_json(output / "results.json", result)
+    write_json(output / "results.json", result)
     (output / "results.md").write_text(outputs.results_markdown(result))
     return result
 
@@ -356,7 +357,7 @@ def evaluate(cfg: DictConfig, command: str | None = None) -> list[dict]:
               f"{Path(cfg.output_dir) / task / 'results.md'}", flush=True)
     if len(results) > 1:
         output = Path(cfg.output_dir)
-        outputs.write_json(output / "summary.json", {"tasks": results})
+        write_json(output / "summary.json", {"tasks": results})
         (output / "summary.md").write_text(outputs.summary_markdown(results))
         print(f"summary -> {output / 'summary.md'}", flush=True)
     return results

@@ -10,7 +10,6 @@ per configuration with ``"variant"``, ``"kind"`` (positional, directional), ``"h
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -157,19 +156,12 @@ def summary_markdown(results: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_json(path: str | Path, payload: Mapping[str, Any]) -> None:
-    """``payload`` as indented JSON (through a temporary file)."""
-    path = Path(path)
-    temporary = path.with_suffix(".tmp")
-    temporary.write_text(json.dumps(payload, indent=2) + "\n")
-    temporary.replace(path)
-
-
-def plot_reward_curves(path: str | Path, title: str, positive: Mapping[str, Tensor],
+def plot_variant_curves(path: str | Path, title: str, positive: Mapping[str, Tensor],
                        negative: Mapping[str, Tensor], success_step: int,
                        ylabel: str = "reward") -> None:
-    """A PNG in the style of the thesis's Figure 5.12: the reward along one successful
-    (blue) and one failed (orange) episode.
+    """A PNG in the style of the thesis's Figure 5.12: one reward variant along one successful
+    (blue) and one failed (orange) episode, one curve per label (finetuned, untrained heads).
+    The training runs' r_P and r_D curves are :func:`temporal_torchrl.reports.plot_reward_curves`.
 
     Args:
         path: the PNG to write.

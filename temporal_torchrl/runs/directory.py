@@ -541,5 +541,6 @@ def write_file(path: Path, write: Callable[[IO[bytes]], None]) -> None:
     fsync_directory(path.parent)
 
 
-def write_json(path: Path, payload: dict[str, Any]) -> None:
-    write_file(path, lambda file: file.write(json.dumps(payload, indent=2).encode()))
+def write_json(path: str | Path, payload: Mapping[str, Any]) -> None:
+    """``payload`` as indented JSON, written whole (:func:`write_file`)."""
+    write_file(Path(path), lambda file: file.write((json.dumps(payload, indent=2) + "\n").encode()))
