@@ -41,9 +41,7 @@ from temporal_torchrl.reports import (
     METRICS,
     build_reliable_table,
     build_table,
-    find_runs,
     group_runs,
-    load_run,
     logged_scalars,
     reward_curves,
 )
@@ -69,6 +67,7 @@ from temporal_torchrl.reports.tables import (
     table_rows,
     write_csv,
 )
+from temporal_torchrl.runs import find_runs, load_run
 
 HOW_TO_READ = """\
 ## How to read this report

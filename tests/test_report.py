@@ -24,7 +24,6 @@ from temporal_torchrl.reports import (
     Configuration,
     build_table,
     find_published,
-    find_runs,
     group_runs,
     logged_scalars,
     published_tables,
@@ -51,6 +50,7 @@ from temporal_torchrl.reports.tables import (
     table_rows,
 )
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.runs import find_runs
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 

@@ -26,7 +26,7 @@ from temporal_torchrl.reports.aggregate import (
     build_table,
     run_value,
 )
-from temporal_torchrl.reports.groups import Run, RunGroup, find_runs, group_runs, load_run
+from temporal_torchrl.reports.groups import RunGroup, group_runs
 from temporal_torchrl.reports.logs import Series, logged_scalars
 from temporal_torchrl.reports.published import (
     Configuration,
@@ -63,7 +63,6 @@ __all__ = [
     "Profile",
     "PublishedResult",
     "ReliableTable",
-    "Run",
     "RunGroup",
     "RunScore",
     "RunValue",
@@ -74,9 +73,7 @@ __all__ = [
     "build_table",
     "configuration_scores",
     "find_published",
-    "find_runs",
     "group_runs",
-    "load_run",
     "logged_scalars",
     "performance_profile",
     "probability_of_improvement",

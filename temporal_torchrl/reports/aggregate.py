@@ -29,12 +29,13 @@ from temporal_torchrl.protocol_metrics import (
     ras,
     time_to_successes,
 )
-from temporal_torchrl.reports.groups import Run, RunGroup, order_tasks
+from temporal_torchrl.reports.groups import RunGroup, order_tasks
 from temporal_torchrl.reports.published import (
     Configuration,
     PublishedResult,
     find_published,
 )
+from temporal_torchrl.runs.readers import Run
 
 #: A run has the metric.
 VALUE = "value"

@@ -33,10 +33,11 @@ from rliable import plot_utils
 
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.protocol_metrics import DEFAULT_WINDOW
-from temporal_torchrl.reports.groups import Run, RunGroup, order_tasks
+from temporal_torchrl.reports.groups import RunGroup, order_tasks
 from temporal_torchrl.reports.logs import Series
 from temporal_torchrl.reports.reliable import ReliableTable
 from temporal_torchrl.reports.reward_curves import EpisodeRewards
+from temporal_torchrl.runs.readers import Run
 
 #: The thesis's colours in Figure 5.12: positive blue, negative orange.
 POSITIVE_COLOUR, NEGATIVE_COLOUR = "tab:blue", "tab:orange"

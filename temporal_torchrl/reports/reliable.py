@@ -57,7 +57,8 @@ from temporal_torchrl.reports.aggregate import (
     Metric,
     run_value,
 )
-from temporal_torchrl.reports.groups import Run, RunGroup
+from temporal_torchrl.reports.groups import RunGroup
+from temporal_torchrl.runs.readers import Run
 
 #: The default baseline of the probability of improvement (``--baseline``).
 DEFAULT_BASELINE = "SAC"

@@ -16,7 +16,6 @@ Example:
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,8 +24,7 @@ import torch
 
 from temporal_torchrl.data import NEGATIVE, episode_history
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.runs import reward_from_config
-from temporal_torchrl.runs.layout import CHECKPOINT, CONFIG_FILE, REPLAY_DIR, episode_file
+from temporal_torchrl.runs.readers import load_episode, load_reward
 
 EXPERT = "expert"
 SUCCESSFUL = "successful training episode"
@@ -54,28 +52,6 @@ class EpisodeRewards:
     first_success: int | None
 
 
-def load_reward(run_dir: str | Path) -> tuple[TemporalReward, dict]:
-    """The run's reward with its saved heads, and its checkpoint (for ``"preloaded"``,
-    ``"inserted"`` and ``"episode"``).
-
-    Rewards registered by the run's ``reward.modules`` must be imported first.
-    """
-    run_dir = Path(run_dir)
-    path = run_dir / CHECKPOINT
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} has no {CHECKPOINT}: the reward heads are saved "
-                                "there after each checkpointed episode.")
-    config = json.loads((run_dir / CONFIG_FILE).read_text())
-    checkpoint = torch.load(path, weights_only=True, map_location="cpu")
-    state = checkpoint["reward"]
-    if not state:
-        raise ValueError(f"{run_dir} has no VLM reward (reward.positional and "
-                         "reward.directional are none): there are no r_P, r_D to plot.")
-    reward = reward_from_config(config, state["goal_embedding"], state["baseline_embedding"])
-    reward.load_state_dict(state)
-    return reward.eval(), checkpoint
-
-
 def episode_rewards(reward: TemporalReward,
                     embeddings: torch.Tensor) -> tuple[np.ndarray | None, np.ndarray | None]:
     """r_P and r_D (None for an absent part) at every state of one episode's embeddings
@@ -93,17 +69,6 @@ def episode_rewards(reward: TemporalReward,
     directional = (parts["directional_reward"].squeeze(-1).numpy()
                    if reward.directional is not None else None)
     return positional, directional
-
-
-def load_episode(run_dir: str | Path, index: int) -> dict[str, torch.Tensor]:
-    """The stored rows of the run's ``index``-th inserted episode."""
-    path = Path(run_dir) / REPLAY_DIR / episode_file(index)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} does not exist: no episode {index} in the replay.")
-    episode = torch.load(path, weights_only=True)
-    if "embedding" not in episode:
-        raise ValueError(f"{path} stores no embeddings: the run has no VLM reward.")
-    return episode
 
 
 def episode_kind(episode: dict[str, torch.Tensor], index: int, preloaded: int) -> str | None:

@@ -1,6 +1,7 @@
 """What a training run is, outside the loop that trains it: its directory and files
 (:mod:`.directory`, :mod:`.layout`), its name (:mod:`.naming`), how it resumes and how sweep jobs
-find it (:mod:`.resume`), and its reward from its config (:mod:`.reward`). The recipe writes runs
+find it (:mod:`.resume`), its reward from its config (:mod:`.reward`), and reading it back
+(:mod:`.readers`). The recipe writes runs
 through this package and the reports read them through it."""
 
 from temporal_torchrl.runs.directory import (
@@ -26,6 +27,15 @@ from temporal_torchrl.runs.layout import (
     protocol_name,
 )
 from temporal_torchrl.runs.naming import default_run_dir, run_directory
+from temporal_torchrl.runs.readers import (
+    RUN_KEYS,
+    Run,
+    find_runs,
+    load_episode,
+    load_reward,
+    load_run,
+    read_successes,
+)
 from temporal_torchrl.runs.resume import (
     DEVICE_KEYS,
     PROCESS_KEYS,
@@ -58,18 +68,25 @@ __all__ = [
     "PROTOCOLS",
     "REPLAY_DIR",
     "RESUMABLE_KEYS",
+    "RUN_KEYS",
     "STAGE2_POSITIVES",
     "SUMMARY_FILE",
+    "Run",
     "RunDirectory",
     "RunLockedError",
     "UnreadableRunFile",
     "check_positives_source",
     "default_run_dir",
+    "find_runs",
     "flatten",
     "has_vlm_reward",
+    "load_episode",
+    "load_reward",
+    "load_run",
     "none_or_name",
     "override_keys",
     "protocol_name",
+    "read_successes",
     "resumed_config",
     "reward_from_config",
     "reward_options",

@@ -1,0 +1,164 @@
+"""Reading runs back: what the reports need of a run directory, read through the run package.
+
+:func:`find_runs` and :func:`load_run` read a run's config, its episodes' successes and its
+summary (a run still running or killed has no summary); :func:`load_reward` and
+:func:`load_episode` read its saved reward heads and its stored episodes.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.runs.layout import (
+    CHECKPOINT,
+    CONFIG_FILE,
+    EPISODES_FILE,
+    REPLAY_DIR,
+    SUMMARY_FILE,
+    episode_file,
+)
+from temporal_torchrl.runs.reward import reward_from_config
+
+#: Keys that tell the runs of one configuration apart (and put them in different table rows).
+RUN_KEYS = ("env.seed", "env.task")
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run directory as read from disk.
+
+    Attributes:
+        path: the run directory.
+        config: its ``config.json`` (the resolved config it ran with).
+        successes: ``z_1, z_2, ...`` from ``episodes.csv`` (one per finished episode).
+        summary: its ``summary.json``, or None while it runs or after it was killed. A run
+            extended with ``resume=true train.episodes=...`` keeps its old summary while it runs
+            on, so :attr:`finished` also checks the summary's episode count.
+    """
+
+    path: Path
+    config: dict[str, Any]
+    successes: tuple[bool, ...]
+    summary: dict[str, Any] | None
+
+    @property
+    def task(self) -> str:
+        return self.setting("env.task")
+
+    @property
+    def seed(self) -> int:
+        return self.setting("env.seed")
+
+    @property
+    def episodes(self) -> int:
+        return len(self.successes)
+
+    @property
+    def finished(self) -> bool:
+        """Whether the run wrote its summary after its last episode (and is not running on)."""
+        return self.summary is not None and self.summary.get("episodes") == self.episodes
+
+    def setting(self, key: str) -> Any:
+        """The config value at dotted ``key``; a clear error when the config lacks it."""
+        value: Any = self.config
+        for part in key.split("."):
+            if not isinstance(value, Mapping) or part not in value:
+                raise ValueError(f"{self.path / CONFIG_FILE} has no {key!r}: is it a config "
+                                 "written by recipes/sac_temporal.py?")
+            value = value[part]
+        return value
+
+
+def read_successes(path: Path) -> tuple[bool, ...]:
+    """The ``success`` column of an ``episodes.csv`` (empty when the file does not exist)."""
+    if not path.exists():
+        return ()
+    with path.open(newline="") as file:
+        reader = csv.DictReader(file)
+        if reader.fieldnames is None:
+            return ()
+        if "success" not in reader.fieldnames or "episode" not in reader.fieldnames:
+            raise ValueError(f"{path} has columns {reader.fieldnames}; expected the recipe's "
+                             "episode, env_steps, success, ... columns.")
+        successes = []
+        for number, row in enumerate(reader, start=1):
+            if row["episode"] != str(number) or row["success"] not in ("0", "1"):
+                raise ValueError(f"{path}: row {number} reads episode={row['episode']!r}, "
+                                 f"success={row['success']!r}; expected episode {number} and "
+                                 "success 0 or 1 (episodes in order, none missing).")
+            successes.append(row["success"] == "1")
+    return tuple(successes)
+
+
+def load_run(path: str | Path) -> Run:
+    """Read one run directory (``config.json``, ``episodes.csv``, ``summary.json`` if any)."""
+    path = Path(path)
+    config_path = path / CONFIG_FILE
+    if not config_path.is_file():
+        raise FileNotFoundError(f"{path} is not a run directory: it has no {CONFIG_FILE}.")
+    config = json.loads(config_path.read_text())
+    summary_path = path / SUMMARY_FILE
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else None
+    run = Run(path, config, read_successes(path / EPISODES_FILE), summary)
+    for key in RUN_KEYS:
+        run.setting(key)  # fail here, naming the file, rather than while grouping
+    return run
+
+
+def find_runs(paths: Iterable[str | Path]) -> list[Run]:
+    """Every run directory in or under ``paths`` (each a run or a sweep directory), sorted."""
+    found: dict[Path, None] = {}
+    for path in map(Path, paths):
+        if not path.is_dir():
+            raise FileNotFoundError(f"{path} is not a directory; pass run directories or sweep "
+                                    "directories that contain them.")
+        configs = [path / CONFIG_FILE] if (path / CONFIG_FILE).is_file() else sorted(
+            path.rglob(CONFIG_FILE))
+        if not configs:
+            raise FileNotFoundError(f"no run directory in {path}: looked for {CONFIG_FILE} in it "
+                                    "and in every directory below it (recipes/sac_temporal.py "
+                                    "writes one into each run directory).")
+        for config in configs:
+            found[config.parent.resolve()] = None
+    return [load_run(path) for path in sorted(found)]
+
+
+def load_reward(run_dir: str | Path) -> tuple[TemporalReward, dict]:
+    """The run's reward with its saved heads, and its checkpoint (for ``"preloaded"``,
+    ``"inserted"`` and ``"episode"``).
+
+    Rewards registered by the run's ``reward.modules`` must be imported first.
+    """
+    run_dir = Path(run_dir)
+    path = run_dir / CHECKPOINT
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} has no {CHECKPOINT}: the reward heads are saved "
+                                "there after each checkpointed episode.")
+    config = json.loads((run_dir / CONFIG_FILE).read_text())
+    checkpoint = torch.load(path, weights_only=True, map_location="cpu")
+    state = checkpoint["reward"]
+    if not state:
+        raise ValueError(f"{run_dir} has no VLM reward (reward.positional and "
+                         "reward.directional are none): there are no r_P, r_D to plot.")
+    reward = reward_from_config(config, state["goal_embedding"], state["baseline_embedding"])
+    reward.load_state_dict(state)
+    return reward.eval(), checkpoint
+
+
+def load_episode(run_dir: str | Path, index: int) -> dict[str, torch.Tensor]:
+    """The stored rows of the run's ``index``-th inserted episode."""
+    path = Path(run_dir) / REPLAY_DIR / episode_file(index)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist: no episode {index} in the replay.")
+    episode = torch.load(path, weights_only=True)
+    if "embedding" not in episode:
+        raise ValueError(f"{path} stores no embeddings: the run has no VLM reward.")
+    return episode
