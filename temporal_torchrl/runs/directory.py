@@ -63,7 +63,6 @@ import io
 import json
 import math
 import os
-import random
 import shutil
 import socket
 from collections.abc import Callable, Iterator, Mapping
@@ -71,7 +70,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-import numpy as np
 import torch
 from filelock import FileLock, Timeout
 from tensordict import TensorDict, TensorDictBase
