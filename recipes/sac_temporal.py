@@ -35,6 +35,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from temporal_torchrl.configs.rules import validate_recipe_config
 from temporal_torchrl.data import episode_rows
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, episode_success, ras, tt50s, ttfs
@@ -55,7 +56,6 @@ from temporal_torchrl.training import (
     rng_state,
     set_rng_state,
 )
-from temporal_torchrl.training.config import replay_capacity, validate_config
 from temporal_torchrl.training.relay import RelayExploration
 
 # What an episode keeps from each step (pixels never reach the buffer).
@@ -71,7 +71,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do). The run
     directory's lock is held throughout: ``RunLockedError`` at once when a live process holds it.
     """
-    validate_config(cfg)
+    cfg = validate_recipe_config(cfg)
     run = RunDirectory(run_directory(cfg))
     with run.lock():  # one writer per run directory, for the whole run
         return _train(cfg, run, given_keys)
@@ -81,8 +81,8 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     """:func:`train`, once the run's lock is held."""
     run.check(resume=cfg.resume, overwrite=cfg.overwrite)
     if cfg.resume:
-        cfg = resumed_config(cfg, run.path, given_keys)
-        validate_config(cfg)  # the saved config, continued, is the one that runs
+        # The saved config, continued, is the one that runs: validated again.
+        cfg = validate_recipe_config(resumed_config(cfg, run.path, given_keys))
     state = run.resume_state() if cfg.resume else None
     if state is not None and state["episode"] >= cfg.train.episodes and run.summary():
         print(f"{run.path}: already complete ({state['episode']} episodes)")
@@ -109,8 +109,8 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     update_sac = factories.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
     expert_rows = (state["expert_rows"] if state is not None
                    else sum(len(rows) for rows in preloaded))
-    capacity = replay_capacity(cfg, expert_rows,
-                               saved=state["buffer_capacity"] if state is not None else None)
+    saved_capacity = state["buffer_capacity"] if state is not None else None
+    capacity = factories.replay_capacity(cfg, expert_rows, saved=saved_capacity)
     buffer = factories.make_replay_buffer(cfg, capacity, reward)
     embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
     trainer = None
