@@ -38,7 +38,7 @@ _NOUNS = {int: ("an integer", "integers"), float: ("a number", "numbers"),
           str: ("a string", "strings")}
 
 
-def invalid(key: str, value: Any, expected: str) -> ValueError:
+def _invalid(key: str, value: Any, expected: str) -> ValueError:
     """The error for a bad value: the key, the value, what was expected, how to fix it."""
     return ValueError(f"config {key}={value!r} is invalid: expected {expected}. "
                       f"Fix it on the command line, e.g. {key}=<value>.")
@@ -53,9 +53,9 @@ def typed(cfg: DictConfig, schema: type) -> DictConfig:
         return OmegaConf.merge(OmegaConf.structured(schema), cfg)
     except OmegaConfBaseException as error:
         key = f" {error.full_key}" if error.full_key else ""
-        raise ValueError(f"config{key} is invalid: {str(error).splitlines()[0]}. Give each key "
-                         f"a value of the type {schema.__name__} declares "
-                         f"({schema.__module__}).") from error
+        raise ValueError(f"config{key} is invalid: {str(error).splitlines()[0]}. Give it a "
+                         f"value of the type {schema.__module__}.{schema.__name__} declares (on "
+                         "the command line, or in a resumed run's config.json).") from error
 
 
 def check_constraints(cfg: DictConfig, schema: type, prefix: str = "") -> None:
@@ -73,15 +73,22 @@ def check_constraints(cfg: DictConfig, schema: type, prefix: str = "") -> None:
             continue
         items = list(value) if isinstance(value, ListConfig) else [value]
         if (constraint.nonempty and not items) or not all(map(constraint.admits, items)):
-            kind, nullable = _without_none(annotation)
-            if typing.get_origin(kind) is list:
-                example = ",".join(str(item) for item in spec.default_factory())
-                expected = (f"a {'non-empty ' if constraint.nonempty else ''}list of "
-                            f"{constraint.describe(_NOUNS[typing.get_args(kind)[0]][1])}, "
-                            f"e.g. [{example}]")
-            else:
-                expected = constraint.describe(_NOUNS.get(kind, ("a value",))[0])
-            raise invalid(key, value, expected + (", or null" if nullable else ""))
+            raise _invalid(key, value, _expected(spec, annotation))
+
+
+def _expected(spec: dataclasses.Field, annotation: Any) -> str:
+    """What a constrained key takes, in words: ``an integer >= 1, or null``, ``a non-empty list
+    of integers >= 1, e.g. [256,256]``, ``one of csv, wandb``."""
+    constraint = spec.metadata[CONSTRAINT]
+    kind, nullable = _without_none(annotation)
+    if typing.get_origin(kind) is list:
+        items = constraint.describe(_NOUNS[typing.get_args(kind)[0]][1])
+        example = ",".join(str(item) for item in spec.default_factory())
+        expected = (f"a {'non-empty ' if constraint.nonempty else ''}list of {items}, "
+                    f"e.g. [{example}]")
+    else:
+        expected = constraint.describe(_NOUNS[kind][0])
+    return expected + (", or null" if nullable else "")
 
 
 def _without_none(annotation: Any) -> tuple[Any, bool]:
@@ -146,19 +153,19 @@ def _check_device(cfg: DictConfig, key: str, train_device: str | None = None) ->
     try:
         resolve_device(OmegaConf.select(cfg, key), train_device=train_device)
     except ValueError as error:
-        raise invalid(key, OmegaConf.select(cfg, key), str(error)) from error
+        raise _invalid(key, OmegaConf.select(cfg, key), str(error)) from error
 
 
 def _check_tasks(tasks: Sequence[Any], given: Any, expected: str) -> None:
     """Each of ``tasks`` (from ``env.task``, ``given``) a known task name."""
     if not tasks or any(not isinstance(task, str) or task not in TASKS for task in tasks):
-        raise invalid("env.task", given, f"{expected} ({len(TASKS)} known: see "
-                      "temporal_torchrl.envs.TASKS)")
+        raise _invalid("env.task", given, f"{expected} ({len(TASKS)} known: see "
+                       "temporal_torchrl.envs.TASKS)")
 
 
 def _check_encoder_name(cfg: DictConfig) -> None:
     if cfg.encoder.name not in ENCODERS:
-        raise invalid("encoder.name", cfg.encoder.name, f"one of {', '.join(ENCODERS)}")
+        raise _invalid("encoder.name", cfg.encoder.name, f"one of {', '.join(ENCODERS)}")
 
 
 def _check_reward_names(key: str, names: Sequence[Any], registry: Mapping[str, Any],
@@ -167,8 +174,8 @@ def _check_reward_names(key: str, names: Sequence[Any], registry: Mapping[str, A
     ``expected``: how many (``one of``, ``a list of``)."""
     if any(not isinstance(name, str | None) or none_or_name(name) not in (None, *registry)
            for name in names):
-        raise invalid(key, given, f"none or {expected} {', '.join(registry)} (your own: "
-                      "register_reward in a module listed in reward.modules)")
+        raise _invalid(key, given, f"none or {expected} {', '.join(registry)} (your own: "
+                       "register_reward in a module listed in reward.modules)")
 
 
 def _check_baseline(task: str, baseline: str) -> None:
@@ -197,20 +204,20 @@ def validate_recipe_config(cfg: DictConfig) -> DictConfig:
     longest = cfg.env.max_episode_steps + 1
     capacity = cfg.replay_buffer.capacity
     if capacity is not None and capacity < longest:
-        raise invalid("replay_buffer.capacity", capacity,
-                      f"null (the whole run) or an integer >= {longest}, the rows of the longest "
-                      "episode (its steps + 1), plus the rows of any preloaded experts")
+        raise _invalid("replay_buffer.capacity", capacity,
+                       f"null (the whole run) or an integer >= {longest}, the rows of the longest "
+                       "episode (its steps + 1), plus the rows of any preloaded experts")
     for key in ("train.device", "encoder.device", "replay_buffer.device"):
         _check_device(cfg, key, train_device=cfg.train.device)
     if cfg.compile.cudagraphs and resolve_device(cfg.train.device).type != "cuda":
-        raise invalid("compile.cudagraphs", True, "false: CUDA graphs need a CUDA train.device")
+        raise _invalid("compile.cudagraphs", True, "false: CUDA graphs need a CUDA train.device")
     _check_baseline(cfg.env.task, cfg.reward.baseline)
     if cfg.train.positives_from == "":
-        raise invalid("train.positives_from", "", "null or the output_dir of a run trained "
-                      "with train.save_positives=true")
+        raise _invalid("train.positives_from", "", "null or the output_dir of a run trained "
+                       "with train.save_positives=true")
     if cfg.reward.certainty_scaling and none_or_name(cfg.reward.directional) is None:
-        raise invalid("reward.certainty_scaling", True, "false without a directional reward "
-                      "(it scales r_D), or a reward.directional such as d3")
+        raise _invalid("reward.certainty_scaling", True, "false without a directional reward "
+                       "(it scales r_D), or a reward.directional such as d3")
     return cfg
 
 
@@ -251,13 +258,13 @@ def validate_reward_quality_config(cfg: DictConfig) -> DictConfig:
         names = _as_list(cfg.reward[key])
         _check_reward_names(f"reward.{key}", names, registry, names, "a list of")
     if not config_variants(cfg):
-        raise invalid("reward.positional", cfg.reward.positional,
-                      "at least one variant to score in reward.positional or reward.directional")
+        raise _invalid("reward.positional", cfg.reward.positional,
+                       "at least one variant to score in reward.positional or reward.directional")
     if max(cfg.dataset.random_episodes, cfg.dataset.failed_expert_episodes) < 2:
-        raise invalid("dataset.random_episodes", cfg.dataset.random_episodes,
-                      "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "
-                      "episodes of each kind, and a kind needs 2 to appear in both the training "
-                      "and the held-out part)")
+        raise _invalid("dataset.random_episodes", cfg.dataset.random_episodes,
+                       "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "
+                       "episodes of each kind, and a kind needs 2 to appear in both the training "
+                       "and the held-out part)")
     for task in tasks:
         _check_baseline(task, cfg.reward.baseline)
     _check_device(cfg, "encoder.device")
