@@ -29,17 +29,21 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
-from typing import Any
 
 import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict
 
+from temporal_torchrl.configs.rules import (
+    config_tasks,
+    config_variants,
+    validate_reward_quality_config,
+)
 from temporal_torchrl.data import EpisodeReplayBuffer, goal_image_embedding
-from temporal_torchrl.encoders import ENCODERS, Encoder
-from temporal_torchrl.envs import TASKS, baseline_text, get_task
+from temporal_torchrl.encoders import Encoder
+from temporal_torchrl.envs import baseline_text, get_task
 from temporal_torchrl.machine import machine_description
 from temporal_torchrl.reward_quality import (
     DatasetSpec,
@@ -54,130 +58,11 @@ from temporal_torchrl.reward_quality import (
     success_length,
     variant_reward,
 )
-from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
 from temporal_torchrl.runs import write_json
 from temporal_torchrl.training import factories
-from temporal_torchrl.training.config import import_reward_modules, resolve_device
-
-_GROUPS = ("env", "encoder", "reward", "dataset", "finetune")
 
 
 # --------------------------------------------------------------------------- configuration
-def _is_integer(value: Any, minimum: int) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-#: (key, check, what is expected) for the numeric settings; null is allowed where noted.
-_CHECKS = (
-    ("env.seed", lambda v: _is_integer(v, 0), "an integer >= 0"),
-    ("env.max_episode_steps", lambda v: _is_integer(v, 1), "an integer >= 1"),
-    ("env.image_size", lambda v: _is_integer(v, 1), "an integer >= 1"),
-    ("reward.k", lambda v: _is_integer(v, 1), "an integer >= 1"),
-    ("reward.alpha", lambda v: _is_number(v) and 0 <= v <= 1, "a number in [0, 1]"),
-    ("reward.delta", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
-    ("reward.l2_margin", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
-    ("reward.gap", lambda v: _is_integer(v, 1), "an integer >= 1"),
-    ("reward.batch_size", lambda v: _is_integer(v, 1), "an integer >= 1"),
-    ("reward.lr", lambda v: _is_number(v) and v > 0, "a number > 0"),
-    ("reward.label_window", lambda v: v is None or _is_integer(v, 1),
-     "an integer >= 1, or null"),
-    ("reward.window", lambda v: _is_integer(v, 2), "an integer >= 2"),
-    ("reward.certainty_bandwidth", lambda v: _is_number(v) and v > 0, "a number > 0"),
-    ("reward.certainty_prior", lambda v: _is_number(v) and v > 0, "a number > 0"),
-    ("dataset.expert_episodes", lambda v: _is_integer(v, 2), "an integer >= 2"),
-    ("dataset.random_episodes", lambda v: _is_integer(v, 0), "an integer >= 0"),
-    ("dataset.failed_expert_episodes", lambda v: _is_integer(v, 0), "an integer >= 0"),
-    ("dataset.expert_noise", lambda v: _is_number(v) and v >= 0, "a number >= 0"),
-    ("dataset.expert_steps_after_success", lambda v: v is None or _is_integer(v, 0),
-     "an integer >= 0, or null"),
-    ("dataset.failure_noise", lambda v: _is_number(v) and v > 0, "a number > 0"),
-    ("dataset.max_attempts", lambda v: _is_integer(v, 1), "an integer >= 1"),
-    ("dataset.held_out_fraction", lambda v: _is_number(v) and 0 < v < 1,
-     "a fraction in (0, 1)"),
-    ("finetune.updates", lambda v: _is_integer(v, 0), "an integer >= 0"),
-    ("finetune.stage", lambda v: v in (1, 2), "1 (failed episodes only) or 2"),
-    ("threads", lambda v: v is None or _is_integer(v, 1), "an integer >= 1, or null"),
-)
-
-
-def _named(value: Any) -> bool:
-    """Whether a variant entry names a reward (``none`` and null do not)."""
-    return value is not None and str(value).lower() != "none"
-
-
-def _bad(key: str, value: Any, expected: str) -> ValueError:
-    return ValueError(f"config {key}={value!r} is invalid: expected {expected}. "
-                      f"Fix it on the command line, e.g. {key}=<value>.")
-
-
-def _as_list(value: Any) -> list:
-    """A config value that may be one item or a list of them, as a list."""
-    return list(value) if isinstance(value, ListConfig | list | tuple) else [value]
-
-
-def config_tasks(cfg: DictConfig) -> list[str]:
-    """``env.task`` as a list of task names (one name or a list of them)."""
-    return _as_list(cfg.env.task)
-
-
-def config_variants(cfg: DictConfig) -> list[str]:
-    """The variants to score: ``reward.positional`` then ``reward.directional`` (``none``
-    dropped; either may be one name or a list)."""
-    return [str(name) for key in ("positional", "directional")
-            for name in _as_list(cfg.reward[key]) if _named(name)]
-
-
-def validate_config(cfg: DictConfig) -> None:
-    """Stop before any work on a bad value, naming the config key (ValueError).
-
-    Imports ``reward.modules`` first, so the rewards they register are known.
-    """
-    for group in _GROUPS:
-        if not isinstance(cfg.get(group), DictConfig):
-            raise _bad(group, cfg.get(group), f"a group of settings (set its keys one by one, "
-                       f"e.g. {group}.<key>=<value>)")
-    import_reward_modules(cfg.reward.modules)
-    tasks = config_tasks(cfg)
-    unknown = [task for task in tasks if task not in TASKS]
-    if not tasks or unknown:
-        raise _bad("env.task", cfg.env.task, "a Metaworld MT50 task name such as drawer-open, "
-                   f"or a list of them ({len(TASKS)} known: see temporal_torchrl.envs.TASKS)")
-    if cfg.encoder.name not in ENCODERS:
-        raise _bad("encoder.name", cfg.encoder.name, f"one of {', '.join(ENCODERS)}")
-    for key, registry in (("positional", POSITIONAL), ("directional", DIRECTIONAL)):
-        names = _as_list(cfg.reward[key])
-        if any(_named(name) and name not in registry for name in names):
-            raise _bad(f"reward.{key}", names, f"none or a list of {', '.join(registry)} (your "
-                       "own: register_reward in a module listed in reward.modules)")
-    if not config_variants(cfg):
-        raise _bad("reward.positional", cfg.reward.positional,
-                   "at least one variant to score in reward.positional or reward.directional")
-    for key, ok, expected in _CHECKS:
-        value = OmegaConf.select(cfg, key)
-        if not ok(value):
-            raise _bad(key, value, expected)
-    if cfg.reward.projection not in ("origin", "line"):
-        raise _bad("reward.projection", cfg.reward.projection, "origin or line")
-    if max(cfg.dataset.random_episodes, cfg.dataset.failed_expert_episodes) < 2:
-        raise _bad("dataset.random_episodes", cfg.dataset.random_episodes,
-                   "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "
-                   "episodes of each kind, and a kind needs 2 to appear in both the training "
-                   "and the held-out part)")
-    for task in tasks:
-        try:
-            baseline_text(task, cfg.reward.baseline)
-        except ValueError as error:
-            raise ValueError(f"config reward.baseline: {error}") from error
-    try:
-        resolve_device(cfg.encoder.device)
-    except ValueError as error:
-        raise _bad("encoder.device", cfg.encoder.device, str(error)) from error
-
-
 def task_config(cfg: DictConfig, task: str) -> DictConfig:
     """``cfg`` with ``env.task`` set to one task."""
     single = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
@@ -344,7 +229,7 @@ def evaluate(cfg: DictConfig, command: str | None = None) -> list[dict]:
     ``command`` is recorded in the results (default: the recipe's name, for configs built in
     code).
     """
-    validate_config(cfg)
+    cfg = validate_reward_quality_config(cfg)
     if cfg.threads is not None:
         torch.set_num_threads(cfg.threads)
     command = command or "python recipes/evaluate_rewards.py (config composed in code)"

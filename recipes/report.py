@@ -125,8 +125,8 @@ def import_reward_modules(run_dir: Path) -> None:
     """Import the run's ``reward.modules`` (its own registered rewards), as the recipe does."""
     modules = json.loads((run_dir / "config.json").read_text())["reward"].get("modules") or []
     if modules:
-        # The training package (heavy imports): only for runs that need it.
-        from temporal_torchrl.training.config import import_reward_modules as load_modules
+        # The config rules import the envs, encoders and rewards: only for runs that need them.
+        from temporal_torchrl.configs.rules import import_reward_modules as load_modules
 
         load_modules(modules)
 

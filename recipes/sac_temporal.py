@@ -36,6 +36,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from temporal_torchrl.configs.rules import validate_recipe_config
 from temporal_torchrl.data import episode_rows
 from temporal_torchrl.runs import (
     RunDirectory,
@@ -59,7 +60,6 @@ from temporal_torchrl.training import (
     run_summary,
     set_rng_state,
 )
-from temporal_torchrl.training.config import replay_capacity, validate_config
 
 
 def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | None:
@@ -69,7 +69,7 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | 
     ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do). The run
     directory's lock is held throughout: ``RunLockedError`` at once when a live process holds it.
     """
-    validate_config(cfg)
+    cfg = validate_recipe_config(cfg)
     run = RunDirectory(run_directory(cfg))
     with run.lock():  # one writer per run directory, for the whole run
         return _train(cfg, run, given_keys)
@@ -79,8 +79,8 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     """:func:`train`, once the run's lock is held."""
     run.check(resume=cfg.resume, overwrite=cfg.overwrite)
     if cfg.resume:
-        cfg = resumed_config(cfg, run.path, given_keys)
-        validate_config(cfg)  # the saved config, continued, is the one that runs
+        # The saved config, continued, is the one that runs: validated again.
+        cfg = validate_recipe_config(resumed_config(cfg, run.path, given_keys))
     checkpoint = run.resume_state() if cfg.resume else None
     if checkpoint is not None and checkpoint["episode"] >= cfg.train.episodes and run.summary():
         print(f"{run.path}: already complete ({checkpoint['episode']} episodes)")
@@ -107,7 +107,7 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     update_sac = factories.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
     expert_rows = (checkpoint["expert_rows"] if checkpoint is not None
                    else sum(len(rows) for rows in preloaded))
-    buffer = factories.make_replay_buffer(cfg, replay_capacity(
+    buffer = factories.make_replay_buffer(cfg, factories.replay_capacity(
         cfg, expert_rows, saved=checkpoint["buffer_capacity"] if checkpoint else None), reward)
     trainer = factories.make_reward_trainer(cfg, reward, goal_image, buffer) if finetune else None
 

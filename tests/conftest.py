@@ -1,4 +1,5 @@
-"""Shared test settings: headless rendering and a deterministic torch (the recipes are
+"""Shared test settings: headless rendering, a deterministic torch and the recipes' config
+schemas in Hydra's ConfigStore for any test that composes a recipe's config (the recipes are
 importable through pytest's ``pythonpath``, see pyproject.toml)."""
 
 import os
@@ -8,6 +9,8 @@ os.environ.setdefault("WANDB_MODE", "offline")
 
 import pytest  # noqa: E402
 import torch  # noqa: E402
+
+import temporal_torchrl.configs  # noqa: E402, F401 (registers the schemas)
 
 
 @pytest.fixture

@@ -10,6 +10,7 @@ import torch
 from helpers import QUICK, RECIPES, config
 from helpers import episode_csv_rows as episode_rows
 from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
 
 import temporal_torchrl.training.episodes as episodes_module
 from temporal_torchrl.runs import RunDirectory, default_run_dir, override_keys, resumed_config
@@ -490,7 +491,7 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     ("reward.positional=p9", "reward.positional"), ("reward.directional=d7", "reward.directional"),
     ("reward.window=1", "reward.window"), ("reward.certainty_prior=0", "reward.certainty_prior"),
     ("reward.certainty_bandwidth=-1", "reward.certainty_bandwidth"),
-    ("reward.certainty_scaling=yes", "reward.certainty_scaling"),
+    ("reward.certainty_scaling=maybe", "reward.certainty_scaling"),
     ("reward.directional=none reward.certainty_scaling=true", "it scales r_D"),
     ("reward.rho=-0.1", "reward.rho"), ("reward.lambda_=-1", "reward.lambda_"),
     ("reward.k=0", "reward.k"), ("train.episodes=0", "train.episodes"),
@@ -498,8 +499,9 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     ("train.expert_steps_after_success=-1", "train.expert_steps_after_success"),
     ("train.relay=maybe", "train.relay"), ("train.relay_periods=[0]", "train.relay_periods"),
     ("train.relay_noise=-1", "train.relay_noise"),
-    ("train.save_positives=1", "train.save_positives"),
-    ("encoder=state", "did you mean encoder.name=state"), ("reward=furl", "reward.<key>"),
+    ("train.save_positives=always", "train.save_positives"),
+    ("encoder=state", "not a subclass of EncoderConfig. value: state\n    full_key: encoder"),
+    ("reward=furl", "not a subclass of RewardConfig. value: furl\n    full_key: reward"),
     ("sac.batch_size=0", "sac.batch_size"),
     ("train.utd_ratio=-1", "train.utd_ratio"), ("env.num_envs=0", "env.num_envs"),
     ("train.device=gpu", "train.device"), ("replay_buffer.device=tpu", "replay_buffer.device"),
@@ -514,9 +516,21 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     ("env.task=reach reward.baseline=tailored", "reach has no tailored baseline"),
 ])
 def test_bad_config_stops_before_any_work(tmp_path, override, key):
-    with pytest.raises(ValueError, match=key.replace(".", r"\.")):
+    """A wrong type stops Hydra as it composes (its error names the override, the OmegaConf
+    error it wraps the key), a value out of range or against the rules the recipe."""
+    with pytest.raises((ConfigCompositionException, ValueError)) as error:
         sac_temporal.train(config(tmp_path, *override.split()))
+    assert key in error_chain(error.value)
     assert not (tmp_path / "run").exists()
+
+
+def error_chain(error: BaseException | None) -> str:
+    """An error's message and its causes'."""
+    messages = []
+    while error is not None:
+        messages.append(str(error))
+        error = error.__cause__
+    return "\n".join(messages)
 
 
 def test_existing_run_needs_overwrite(tmp_path):

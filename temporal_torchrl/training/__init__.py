@@ -1,5 +1,6 @@
 """The training loop's parts: the recipe's factories, the reward-head trainer, relay exploration,
-the metrics logger, the random generators' state, and the recipe config's validation."""
+the metrics logger and the random generators' state (the recipe's config and its checks:
+:mod:`temporal_torchrl.configs`)."""
 
 from temporal_torchrl.training.episodes import STEP_KEYS, EpisodeAssembler, episode_row
 from temporal_torchrl.training.logger import (

@@ -23,6 +23,7 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import SACLoss, SoftUpdate
 from torchrl.record.loggers import CSVLogger, Logger, WandbLogger
 
+from temporal_torchrl.configs.rules import resolve_device
 from temporal_torchrl.data import (
     EpisodeReplayBuffer,
     embed_episode,
@@ -39,7 +40,6 @@ from temporal_torchrl.envs import (
 )
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.runs import RunDirectory, check_positives_source, reward_options
-from temporal_torchrl.training.config import resolve_device
 from temporal_torchrl.training.logger import RunLogger
 from temporal_torchrl.training.relay import RelayExploration, RelayPolicy, RelaySchedule
 from temporal_torchrl.training.trainer import RewardHeadTrainer
@@ -177,6 +177,24 @@ def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor,
                          noise=cfg.train.relay_noise)
     return RelayExploration(policy, loss, optimizer,
                             make_sac_update(cfg, loss, target_updater, optimizer))
+
+
+def replay_capacity(cfg: DictConfig, expert_rows: int = 0, saved: int | None = None) -> int:
+    """Buffer rows: ``replay_buffer.capacity``, or (null) the whole run, every training episode
+    plus ``expert_rows``, capped at 1,000,000. A resumed run never shrinks its ``saved``
+    capacity, and grows it (saying so) when it was extended."""
+    capacity = cfg.replay_buffer.capacity
+    if capacity is None:
+        capacity = min(cfg.train.episodes * (cfg.env.max_episode_steps + 1) + expert_rows,
+                       1_000_000)
+    if capacity - expert_rows < cfg.env.max_episode_steps + 1:
+        raise ValueError(f"config replay_buffer.capacity={capacity} is invalid: the preloaded "
+                         f"experts take {expert_rows} rows and an episode up to "
+                         f"{cfg.env.max_episode_steps + 1}; raise it (or set null).")
+    if saved is not None and capacity > saved:
+        print(f"resume: replay capacity grown from {saved:,} to {capacity:,} rows for "
+              f"train.episodes={cfg.train.episodes}")
+    return max(capacity, saved or 0)
 
 
 def make_replay_buffer(cfg: DictConfig, capacity: int,

@@ -32,6 +32,10 @@ sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
 
+from temporal_torchrl.configs.rules import (  # noqa: E402
+    config_tasks,
+    validate_reward_quality_config,
+)
 from temporal_torchrl.reward_quality import (  # noqa: E402
     make_finetuning_buffer,
 )
@@ -84,10 +88,10 @@ def main(overrides: list[str]) -> None:
     torch.set_num_threads(1)
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
         cfg = compose("evaluate_rewards", overrides=overrides)
-    evaluate_rewards.validate_config(cfg)
+    cfg = validate_reward_quality_config(cfg)
     encoder = factories.make_encoder(cfg)
     start = time.perf_counter()
-    tasks = evaluate_rewards.config_tasks(cfg)
+    tasks = config_tasks(cfg)
     per_task = {task: task_targets(evaluate_rewards.task_config(cfg, task), encoder)
                 for task in tasks}
     lines = [

@@ -34,6 +34,10 @@ sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
 
+from temporal_torchrl.configs.rules import (  # noqa: E402
+    config_tasks,
+    validate_reward_quality_config,
+)
 from temporal_torchrl.reward_quality import (  # noqa: E402
     auroc,
     direction_accuracy,
@@ -110,10 +114,10 @@ def main(overrides: list[str]) -> None:
     torch.set_num_threads(1)
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
         cfg = compose("evaluate_rewards", overrides=overrides)
-    evaluate_rewards.validate_config(cfg)
+    cfg = validate_reward_quality_config(cfg)
     start = time.perf_counter()
     encoder = factories.make_encoder(cfg)
-    tasks = evaluate_rewards.config_tasks(cfg)
+    tasks = config_tasks(cfg)
     per_task = {task: task_shapes(evaluate_rewards.task_config(cfg, task), encoder)
                 for task in tasks}
     lines = ["# The shape of the finetuned directional reward: D3, d_certainty, D3 x certainty",

@@ -32,6 +32,10 @@ sys.path.insert(0, str(RECIPES))
 
 import evaluate_rewards  # noqa: E402
 
+from temporal_torchrl.configs.rules import (  # noqa: E402
+    config_tasks,
+    validate_reward_quality_config,
+)
 from temporal_torchrl.objectives import finetuning_losses  # noqa: E402
 from temporal_torchrl.reward_quality import (  # noqa: E402
     finetune_reward,
@@ -121,7 +125,7 @@ def main(overrides: list[str]) -> None:
     torch.set_num_threads(1)
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
         cfg = compose("evaluate_rewards", overrides=overrides)
-    evaluate_rewards.validate_config(cfg)
+    cfg = validate_reward_quality_config(cfg)
     start = time.perf_counter()
     length = cfg.reward.window
     lines = ["# d_sequence: Transformer or temporal convolution", "",
@@ -145,7 +149,7 @@ def main(overrides: list[str]) -> None:
                      f"{milliseconds[0]:.1f} | {milliseconds[1]:.1f} |")
         print(lines[-1], flush=True)
     encoder = factories.make_encoder(cfg)
-    tasks = evaluate_rewards.config_tasks(cfg)
+    tasks = config_tasks(cfg)
     per_task = {task: task_scores(evaluate_rewards.task_config(cfg, task), encoder)
                 for task in tasks}
     lines += ["", f"Reward quality after {cfg.finetune.updates} updates (stage "

@@ -1,0 +1,121 @@
+"""The recipes' config schemas (temporal_torchrl.configs): they agree with the YAML files, Hydra
+refuses a wrong type naming the key, the declared ranges and the rules refuse a bad value naming
+the key, and a resumed config is typed and checked like a new one."""
+
+import json
+import re
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
+from omegaconf import OmegaConf
+from test_recipe import RECIPES, error_chain
+
+from temporal_torchrl.configs import RecipeConfig, RewardQualityConfig
+from temporal_torchrl.configs.rules import validate_recipe_config, validate_reward_quality_config
+from temporal_torchrl.runs import resumed_config
+from temporal_torchrl.runs.layout import flatten
+
+
+def composed(config_name: str, *overrides: str):
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        return compose(config_name, overrides=list(overrides))
+
+
+@pytest.mark.parametrize(("yaml_file", "schema"), [
+    ("config.yaml", RecipeConfig), ("evaluate_rewards.yaml", RewardQualityConfig)])
+def test_schema_and_yaml_state_the_same_keys_and_defaults(yaml_file, schema):
+    written = OmegaConf.to_container(OmegaConf.load(RECIPES / yaml_file))
+    del written["defaults"], written["hydra"]  # the composition and Hydra's own settings
+    declared = OmegaConf.to_container(OmegaConf.structured(schema))
+    written, declared = flatten(written), flatten(declared)
+    assert sorted(written) == sorted(declared)
+    assert {key: value for key, value in written.items() if declared[key] != value} == {}
+
+
+def test_defaults_presets_and_protocols_pass_the_rules():
+    validate_reward_quality_config(composed("evaluate_rewards"))
+    for preset in sorted(path.stem for path in (RECIPES / "preset").glob("*.yaml")):
+        for protocol in ("stage1", "stage2"):
+            cfg = validate_recipe_config(composed("config", f"preset={preset}",
+                                                  f"protocol={protocol}"))
+            assert OmegaConf.get_type(cfg) is RecipeConfig
+
+
+@pytest.mark.parametrize(("config_name", "override", "message"), [
+    ("config", "train.episodes=many", "Value 'many' of type 'str' could not be converted to "
+     "Integer\n    full_key: train.episodes"),
+    ("config", "reward.rho=1.5.2", "full_key: reward.rho"),
+    ("config", "train.relay=maybe", "Value 'maybe' is not a valid bool (type str)\n"
+     "    full_key: train.relay"),
+    ("config", "sac.hidden_sizes=256", "full_key: sac.hidden_sizes"),
+    ("config", "encoder=state", "str is not a subclass of EncoderConfig. value: state\n"
+     "    full_key: encoder"),
+    ("config", "train.epsiodes=5", "Could not override 'train.epsiodes'"),
+    ("evaluate_rewards", "finetune.updates=1e3", "full_key: finetune.updates"),
+])
+def test_hydra_refuses_a_wrong_type_naming_the_key(config_name, override, message):
+    with pytest.raises(ConfigCompositionException, match=re.escape(override)) as error:
+        composed(config_name, override)
+    assert message in error_chain(error.value)
+
+
+@pytest.mark.parametrize(("override", "message"), [
+    ("train.episodes=0", "config train.episodes=0 is invalid: expected an integer >= 1. Fix it on "
+     "the command line, e.g. train.episodes=<value>."),
+    ("sac.gamma=1.5", "config sac.gamma=1.5 is invalid: expected a number in (0, 1]."),
+    ("reward.alpha=-0.1", "config reward.alpha=-0.1 is invalid: expected a number in [0, 1]."),
+    ("train.threads=0", "config train.threads=0 is invalid: expected an integer >= 1, or null."),
+    ("sac.hidden_sizes=[256,0]", "config sac.hidden_sizes=[256, 0] is invalid: expected a "
+     "non-empty list of integers >= 1, e.g. [256,256]."),
+    ("train.relay_periods=[]", "expected a non-empty list of integers >= 1, e.g. "
+     "[50,100,150,200]"),
+    ("logger.backend=tensorboard", "config logger.backend='tensorboard' is invalid: expected one "
+     "of wandb, csv, none."),
+    ("compile.mode=fastest", "expected one of default, reduce-overhead, max-autotune, "
+     "max-autotune-no-cudagraphs, or null."),
+    ("replay_buffer.capacity=100", "config replay_buffer.capacity=100 is invalid: expected null "
+     "(the whole run) or an integer >= 501"),
+])
+def test_a_value_out_of_range_is_refused_naming_the_key(override, message):
+    cfg = composed("config", override)  # the type is right: Hydra composes it
+    with pytest.raises(ValueError) as error:
+        validate_recipe_config(cfg)
+    assert message in str(error.value)
+
+
+def test_the_reward_quality_ranges_are_its_own():
+    with pytest.raises(ValueError, match=r"dataset\.held_out_fraction=1\.0 is invalid: expected "
+                                         r"a number in \(0, 1\)"):
+        validate_reward_quality_config(composed("evaluate_rewards", "dataset.held_out_fraction=1"))
+    with pytest.raises(ValueError, match=r"finetune\.stage=3 is invalid: expected one of 1, 2"):
+        validate_reward_quality_config(composed("evaluate_rewards", "finetune.stage=3"))
+
+
+def test_a_config_built_in_code_is_typed_by_the_schema():
+    with pytest.raises(ValueError, match=r"config reward\.rho is invalid: Value 'abc' of type "
+                                         r"'str' could not be converted to Float"):
+        validate_recipe_config(OmegaConf.create({"reward": {"rho": "abc"}}))
+    with pytest.raises(ValueError, match=r"config train\.epsiodes is invalid: Key 'epsiodes' not "
+                                         r"in 'TrainConfig'"):
+        validate_recipe_config(OmegaConf.create({"train": {"epsiodes": 5}}))
+    cfg = validate_recipe_config(OmegaConf.create({"train": {"utd_ratio": "0.5"}}))
+    assert cfg.train.utd_ratio == 0.5 and cfg.env.task == "drawer-open"  # the rest: defaults
+
+
+def test_an_older_run_resumes_with_the_current_defaults_for_its_missing_keys(tmp_path):
+    saved = OmegaConf.to_container(composed("config", "reward.rho=0.5"), resolve=True)
+    del saved["reward"]["certainty_scaling"], saved["train"]["relay_threshold"]
+    saved["train"]["utd_ratio"] = "2"  # a hand-edited config.json: typed on resume
+    (tmp_path / "config.json").write_text(json.dumps(saved))
+    current = composed("config", "resume=true", f"output_dir={tmp_path}")
+    cfg = validate_recipe_config(resumed_config(current, tmp_path, given_keys={"resume"}))
+    assert OmegaConf.get_type(cfg) is RecipeConfig
+    assert (cfg.reward.rho, cfg.reward.certainty_scaling, cfg.train.relay_threshold) == (
+        0.5, False, 2500)
+    assert cfg.train.utd_ratio == 2.0 and cfg.resume
+
+    saved["reward"]["k"] = 0
+    (tmp_path / "config.json").write_text(json.dumps(saved))
+    with pytest.raises(ValueError, match=r"config reward\.k=0 is invalid"):
+        validate_recipe_config(resumed_config(current, tmp_path, given_keys={"resume"}))
