@@ -1,0 +1,81 @@
+"""What a training run is, outside the loop that trains it: its directory and files
+(:mod:`.directory`, :mod:`.layout`), its name (:mod:`.naming`), how it resumes and how sweep jobs
+find it (:mod:`.resume`), and its reward from its config (:mod:`.reward`). The recipe writes runs
+through this package and the reports read them through it."""
+
+from temporal_torchrl.runs.directory import (
+    LOCK,
+    PREVIOUS_CHECKPOINT,
+    RunDirectory,
+    RunLockedError,
+    UnreadableRunFile,
+    write_json,
+)
+from temporal_torchrl.runs.layout import (
+    CHECKPOINT,
+    CONFIG_FILE,
+    EPISODE_COLUMNS,
+    EPISODES_FILE,
+    METRICS_FILE,
+    POSITIVES_DIR,
+    PROTOCOLS,
+    REPLAY_DIR,
+    STAGE2_POSITIVES,
+    SUMMARY_FILE,
+    flatten,
+    protocol_name,
+)
+from temporal_torchrl.runs.naming import default_run_dir, run_directory
+from temporal_torchrl.runs.resume import (
+    DEVICE_KEYS,
+    PROCESS_KEYS,
+    RESUMABLE_KEYS,
+    check_positives_source,
+    override_keys,
+    resumed_config,
+    sweep_job_config,
+    threads_per_job,
+)
+from temporal_torchrl.runs.reward import (
+    has_vlm_reward,
+    none_or_name,
+    reward_from_config,
+    reward_options,
+    uses_vlm_reward,
+)
+
+__all__ = [
+    "CHECKPOINT",
+    "CONFIG_FILE",
+    "DEVICE_KEYS",
+    "EPISODES_FILE",
+    "EPISODE_COLUMNS",
+    "LOCK",
+    "METRICS_FILE",
+    "POSITIVES_DIR",
+    "PREVIOUS_CHECKPOINT",
+    "PROCESS_KEYS",
+    "PROTOCOLS",
+    "REPLAY_DIR",
+    "RESUMABLE_KEYS",
+    "STAGE2_POSITIVES",
+    "SUMMARY_FILE",
+    "RunDirectory",
+    "RunLockedError",
+    "UnreadableRunFile",
+    "check_positives_source",
+    "default_run_dir",
+    "flatten",
+    "has_vlm_reward",
+    "none_or_name",
+    "override_keys",
+    "protocol_name",
+    "resumed_config",
+    "reward_from_config",
+    "reward_options",
+    "run_directory",
+    "sweep_job_config",
+    "threads_per_job",
+    "uses_vlm_reward",
+    "write_json",
+]

@@ -1,0 +1,49 @@
+"""A run directory's file names and a run's protocol names: the one place that defines them.
+
+:class:`~temporal_torchrl.training.RunDirectory` writes these files; the reports read them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+CONFIG_FILE = "config.json"
+EPISODES_FILE = "episodes.csv"
+SUMMARY_FILE = "summary.json"
+CHECKPOINT = "checkpoint.pt"
+METRICS_FILE = "metrics.jsonl"
+REPLAY_DIR = "replay"
+POSITIVES_DIR = "positives"
+#: The columns of ``episodes.csv``.
+EPISODE_COLUMNS = ("episode", "env_steps", "success", "return", "mean_vlm_reward", "stage")
+
+
+def episode_file(index: int) -> str:
+    """The name of the ``index``-th inserted episode's file in ``replay/`` (and of training
+    episode ``index``'s in ``positives/``)."""
+    return f"{index:06d}.pt"
+
+
+#: Preloaded positive episodes of each protocol of the thesis (section 5.1).
+PROTOCOLS = {0: "stage1", 50: "stage2"}
+#: Positive episodes the thesis preloads in its second stage (protocol=stage2).
+STAGE2_POSITIVES = next(count for count, name in PROTOCOLS.items() if name == "stage2")
+
+
+def protocol_name(preload_positives: int) -> str:
+    """``stage1`` (no preloaded episodes), ``stage2`` (50), else ``preload<N>``."""
+    return PROTOCOLS.get(preload_positives, f"preload{preload_positives}")
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"reward": {"rho": 1.0}}`` -> ``{"reward.rho": 1.0}`` (lists and empty groups stay
+    values)."""
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}.{key}" if prefix else str(key)
+        if isinstance(value, Mapping) and value:
+            flat.update(flatten(value, name))
+        else:
+            flat[name] = value
+    return flat

@@ -1,0 +1,122 @@
+"""Continuing a run: the config it resumes with, the keys a process may change, sweep jobs that
+resume their runs, and positives one run gives another."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+from collections.abc import Collection, Sequence
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from temporal_torchrl.runs.directory import RunDirectory
+from temporal_torchrl.runs.layout import CONFIG_FILE, flatten
+from temporal_torchrl.runs.naming import run_directory
+from temporal_torchrl.runs.reward import uses_vlm_reward
+
+
+def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
+    """One job of a ``-m`` sweep: its run directory under the sweep directory, resumed when a
+    checkpoint is there (a re-launched sweep continues its runs, finished ones return at once),
+    restarted when the job died before its first checkpoint, and torch threads set so that
+    parallel jobs share the cores instead of oversubscribing them. A run a live process is
+    writing is left as it is: :func:`train` then stops on its lock (``RunLockedError``)."""
+    cfg = copy.deepcopy(cfg)
+    if cfg.runs_dir is None:
+        cfg.runs_dir = hydra_config.sweep.dir
+    run = RunDirectory(run_directory(cfg))
+    if not cfg.overwrite and not cfg.resume and run.locked_by() is None:
+        if run.has_checkpoint():
+            cfg.resume = True
+        elif run.holds_files():
+            print(f"{run.path}: no checkpoint yet, starting it over")
+            cfg.overwrite = True
+    if cfg.train.threads is None:
+        cfg.train.threads = threads_per_job(hydra_config.launcher)
+    return cfg
+
+
+def threads_per_job(launcher: DictConfig) -> int | None:
+    """Cores / parallel jobs for the joblib launcher (``n_jobs`` -1 or null: one per core);
+    None (torch's default) for the others: Slurm gives each job its own CPUs."""
+    if "n_jobs" not in launcher:
+        return None
+    cores = os.cpu_count() or 1
+    jobs = launcher.n_jobs if launcher.n_jobs not in (None, -1) and launcher.n_jobs > 0 else cores
+    return max(1, cores // min(jobs, cores))
+
+
+#: Keys about this process, not the run (where and how to resume, when to stop, the progress bar,
+#: threads): a resumed run always takes their current values.
+PROCESS_KEYS = ("resume", "overwrite", "output_dir", "runs_dir", "train.stop_after_episodes",
+                "train.progress", "train.threads")
+
+
+#: Keys of the run a resumed run may change when they are given on the command line; every
+#: other value comes from the run's saved config.json.
+RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every")
+#: Where a run computes: the same run on another device (the reports group them as one).
+DEVICE_KEYS = ("encoder.device", "train.device", "replay_buffer.device")
+
+
+def override_keys(overrides: Sequence[str]) -> set[str]:
+    """The config keys that command-line overrides set (``+``, ``++`` and ``~`` dropped)."""
+    return {override.split("=", 1)[0].lstrip("+~") for override in overrides}
+
+
+def resumed_config(cfg: DictConfig, run_dir: Path,
+                   given_keys: Collection[str] | None = None) -> DictConfig:
+    """The config of the run in ``run_dir``, continued with ``cfg``'s :data:`PROCESS_KEYS`.
+
+    A resumed run must go on with the task, encoder, reward and hyperparameters it started with,
+    whatever the command line's defaults are now; so ``resume=true output_dir=...`` is enough.
+    Of :data:`RESUMABLE_KEYS`, ``cfg``'s values replace the saved ones only for ``given_keys``
+    (the keys set on the command line), or all of them when ``given_keys`` is None (a config
+    built in code). Keys the saved config lacks (added to the recipe after the run started) take
+    ``cfg``'s values.
+    """
+    current = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
+    saved = OmegaConf.merge(current, json.loads((run_dir / CONFIG_FILE).read_text()))
+    applied = [*PROCESS_KEYS, *(key for key in RESUMABLE_KEYS
+                               if given_keys is None or key in given_keys)]
+    for key in applied:
+        OmegaConf.update(saved, key, OmegaConf.select(cfg, key), force_add=True)
+    saved_values = flatten(OmegaConf.to_container(saved, resolve=True))
+    differing = [key for key, value in flatten(OmegaConf.to_container(cfg, resolve=True)).items()
+                 if key not in applied and saved_values.get(key, value) != value]
+    if differing:
+        print(f"resume: continuing with {run_dir / CONFIG_FILE}; not using the current "
+              f"values of {', '.join(differing)}")
+    return saved
+
+
+#: What a run giving its saved positives to another must share with it: the layout always, the
+#: frames and the encoder when the receiving run embeds them.
+_LAYOUT_KEYS = ("env.task", "env.seed")
+_FRAME_KEYS = ("env.image_size", "env.camera", "env.fast_render", "encoder.name",
+               "encoder.checkpoint", "encoder.options")
+
+
+def check_positives_source(cfg: DictConfig, source_config: dict[str, Any]) -> None:
+    """Raise unless the run in ``train.positives_from`` (its saved ``source_config``) made its
+    positives with this run's task, layout and, when this run has a VLM reward, frames and
+    encoder."""
+    source = OmegaConf.create(source_config)
+    keys = _LAYOUT_KEYS + (_FRAME_KEYS if uses_vlm_reward(cfg) else ())
+    if uses_vlm_reward(cfg) and not uses_vlm_reward(source):
+        raise ValueError(f"config train.positives_from={cfg.train.positives_from!r} is a run "
+                         "without a VLM reward: its positives carry no embeddings. Take them "
+                         "from a run with this run's encoder.")
+    for key in keys:
+        theirs, ours = OmegaConf.select(source, key), OmegaConf.select(cfg, key)
+        if isinstance(theirs, DictConfig):
+            theirs, ours = OmegaConf.to_container(theirs), OmegaConf.to_container(ours)
+        if theirs != ours:
+            raise ValueError(
+                f"config train.positives_from={cfg.train.positives_from!r} was trained with "
+                f"{key}={theirs!r}, this run has {key}={ours!r}: preloaded positives must come "
+                "from the same task, layout (env.seed), frames and encoder. Use a source run "
+                f"with {key}={ours!r}.")
