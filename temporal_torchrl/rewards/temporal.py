@@ -66,9 +66,9 @@ class TemporalReward(nn.Module):
             factor only shapes the reward the agent sees.
 
     Attributes:
-        positional_heads, directional_heads: the trainable :class:`RewardHeads` (f^P, f^D), or None
-            when that part is absent or zero-shot (registered with ``image_input=None``, like
-            ``"liv"``).
+        positional_heads: the trainable :class:`RewardHeads` f^P, or None when that part is
+            absent or zero-shot (registered with ``image_input=None``, like ``"liv"``).
+        directional_heads: the trainable :class:`RewardHeads` f^D, or None likewise.
         window_length: K when a part reads the window (registered with ``image_input="window"``),
             else None: the history transform and the replay buffer need no window.
         certainty: the :class:`~temporal_torchrl.rewards.certainty.CertaintyMemory` of

@@ -63,7 +63,6 @@ import io
 import json
 import math
 import os
-import random
 import shutil
 import socket
 from collections.abc import Callable, Iterator, Mapping
@@ -71,7 +70,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-import numpy as np
 import torch
 from filelock import FileLock, Timeout
 from tensordict import TensorDict, TensorDictBase
@@ -200,7 +198,7 @@ class RunDirectory:
                     pass
 
     def locked_by(self) -> str | None:
-        """Who holds the run's lock (as :attr:`RunLockedError.holder`), None when no live process
+        """Who holds the run's lock (as ``RunLockedError.holder``), None when no live process
         does. A probe: the answer may change as soon as it is given."""
         if not (self.path / LOCK).exists():
             return None
