@@ -60,7 +60,7 @@ class TemporalReward(nn.Module):
             certainty loss (d_certainty) and by ``certainty_scaling``.
         certainty_scaling: the multiplicative option of the thesis's section 6.4 proposal
             (beyond the thesis): the directional reward that :meth:`forward` returns is
-            |t(s_t, Δs_t)| r_D, with t from the references of the last finetuning batch
+            ``|t(s_t, Δs_t)|`` r_D, with t from the references of the last finetuning batch
             (:attr:`certainty`). :meth:`directional_reward`, which the finetuning losses call,
             stays unscaled: the heads are trained as they are (the "step function"), the
             factor only shapes the reward the agent sees.
@@ -230,7 +230,7 @@ class TemporalReward(nn.Module):
         ``window`` ``[..., K, D]`` when a part reads it).
 
         Returns a dict with ``"task_reward"`` (success - 1), ``"positional_reward"`` (r_P),
-        ``"directional_reward"`` (r_D, times |t(s_t, Δs_t)| with ``certainty_scaling``),
+        ``"directional_reward"`` (r_D, times ``|t(s_t, Δs_t)|`` with ``certainty_scaling``),
         ``"vlm_reward"`` (r_P + lambda r_D) and ``"reward"`` (r_task + rho vlm), each float32
         ``[..., 1]``; an absent part is 0.
         """
