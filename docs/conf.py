@@ -246,7 +246,15 @@ def _no_inline_type(app, what, name, obj, options, lines):
         lines[:0] = ["..", ""]
 
 
+def _per_task_results_are_orphans(app, docname, source):
+    """The per-task result pages are linked from results.md's table, not listed in the
+    navigation (sixty entries of the same few titles); mark them orphans so Sphinx knows."""
+    if docname.startswith("results/") and docname.endswith("/results"):
+        source[0] = "---\norphan: true\n---\n" + source[0]
+
+
 def setup(app):
+    app.connect("source-read", _per_task_results_are_orphans)
     app.connect("autodoc-process-docstring", _constant_docstring, priority=400)
     app.connect("autodoc-process-docstring", _no_inline_type, priority=450)
     app.connect("autodoc-skip-member", _keep_subclass_hooks)
