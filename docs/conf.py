@@ -199,8 +199,13 @@ def _constant_docstring(app, what, name, obj, options, lines):
     """A constant re-exported by a package keeps the ``#:`` comment of the module that
     defines it (autodoc looks for it in the package's ``__init__`` only, then falls back to the
     docstring of the value's type, ``dict``'s for a dict)."""
+    if what != "data":
+        return
+    type_doc = inspect.getdoc(type(obj)) or ""
+    if type_doc and " ".join(" ".join(lines).split()) == " ".join(type_doc.split()):
+        lines.clear()  # an undocumented constant: say nothing rather than str's docstring
     package_name, _, attribute = name.rpartition(".")
-    if what != "data" or package_name not in PACKAGES:
+    if package_name not in PACKAGES:
         return
     from sphinx.pycode import ModuleAnalyzer
 

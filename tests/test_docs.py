@@ -107,3 +107,21 @@ def test_every_example_is_in_a_guide():
     examples = {path.name for path in (ROOT / "examples").iterdir()
                 if path.suffix in {".py", ".sh"}}
     assert examples <= included, examples - included
+
+
+def test_the_api_reference_lists_every_package():
+    """A new subpackage (or a removed one) shows here, not only in CI's docs build: add it to
+    ``PACKAGES`` in docs/conf.py and to docs/api/index.rst."""
+    import pkgutil
+
+    import temporal_torchrl
+
+    packages = {f"temporal_torchrl.{info.name}" for info in pkgutil.iter_modules(
+        temporal_torchrl.__path__) if info.ispkg}
+    conf = (DOCS / "conf.py").read_text()
+    listed = set(re.findall(r'"(temporal_torchrl\.\w+)",', conf.split("PACKAGES = [")[1]
+                            .split("]")[0]))
+    index = set(re.findall(r"^   (temporal_torchrl\.\w+)$", (DOCS / "api" / "index.rst")
+                           .read_text(), flags=re.M))
+    assert listed == packages, f"docs/conf.py PACKAGES: {sorted(packages ^ listed)}"
+    assert packages <= index, f"docs/api/index.rst: {sorted(packages - index)}"

@@ -16,7 +16,6 @@ reference does not document, still fails the build (``nitpicky``, ``-W``).
 from __future__ import annotations
 
 import importlib
-import os
 from typing import Any
 
 from docutils import nodes
@@ -142,8 +141,6 @@ def resolve(app, env, node: pending_xref, contnode):
         app.env.temp_data["public_names"] = names
     candidates = [target] if target.startswith(PACKAGE + ".") else []
     candidates += [f"{context}.{target}" for context in _contexts(node)]
-    if os.environ.get("PUBLIC_NAMES_DEBUG"):
-        print("public_names:", target, candidates)
     for candidate in candidates:
         name = names.documented_name(candidate)
         if name is None:
