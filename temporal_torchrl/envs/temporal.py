@@ -2,8 +2,8 @@
 
 :func:`make_temporal_env` stacks the four transforms on the task's env in the order the rewards
 need them (the reward from :func:`~temporal_torchrl.envs.make_temporal_reward`). It is what
-``recipes/sac_temporal.py`` runs; compose the transforms by hand (see the README) to change the
-order or add your own.
+``recipes/sac_temporal.py`` runs; compose the transforms by hand (``docs/guides/composing.md``)
+to change the order or add your own.
 """
 
 from __future__ import annotations
@@ -23,8 +23,6 @@ from temporal_torchrl.transforms import (
     EmbeddingTransform,
     TemporalRewardTransform,
 )
-
-#: Expert episodes get the protocol's full episode length to succeed, however short training's.
 
 
 def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = None,

@@ -123,7 +123,7 @@ def direction_certainty(positions: Tensor, directions: Tensor, reference_positio
 
 class CertaintyMemory(nn.Module):
     """Reference states for the certainty at reward time (the multiplicative option,
-    ``TemporalReward(certainty_scaling=True)``: r_D <- |t(s_t, Δs_t)| r_D).
+    ``TemporalReward(certainty_scaling=True)``: r_D <- ``|t(s_t, Δs_t)|`` r_D).
 
     Holds the positions, directions and labels of the last finetuning batch
     (:meth:`remember`, called by the directional losses) and their :func:`reference_scales`, as

@@ -97,9 +97,11 @@ def d4(heads: RewardHeads, s: Tensor, *, s0: Tensor | None = None, s_prev: Tenso
 def d5(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor, b: Tensor,
        alpha: float = 0.4, position: Tensor | None = None, projection: str = "origin",
        **unused) -> Tensor:
-    """D5, goal-baseline-regularised position and direction (thesis 4.3.2):
-    r_D5(s_t, Δs_t) = csim(f^D_{W_I}((alpha proj_L s_t + (1 - alpha) s_t) ⊕ Δs_t),
-                           f^D_{W_L}(g - b)),
+    """D5, goal-baseline-regularised position and direction (thesis 4.3.2)::
+
+        r_D5(s_t, Δs_t) = csim(f^D_{W_I}((alpha proj_L s_t + (1 - alpha) s_t) ⊕ Δs_t),
+                               f^D_{W_L}(g - b)),
+
     L = g - b. The regularisation runs on the raw embeddings s_t, g and b (``projection="origin"``,
     as the thesis and its release write it; see
     :func:`~temporal_torchrl.rewards.positional.goal_baseline_regularise`); the regularised

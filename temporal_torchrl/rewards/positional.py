@@ -123,9 +123,11 @@ def p2(heads: RewardHeads, s: Tensor, *, s0: Tensor | None = None, g: Tensor,
 
 def p3(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.4,
        projection: str = "origin", **unused) -> Tensor:
-    """P3, goal-baseline regularisation after the heads (thesis 4.2.2):
-    r_P3(s_t) = 1 - 1/2 ||alpha proj_L(f^P_{W_I}(s_t)) + (1 - alpha) f^P_{W_I}(s_t)
-                          - f^P_{W_L}(g)||^2,
+    """P3, goal-baseline regularisation after the heads (thesis 4.2.2)::
+
+        r_P3(s_t) = 1 - 1/2 ||alpha proj_L(f^P_{W_I}(s_t)) + (1 - alpha) f^P_{W_I}(s_t)
+                              - f^P_{W_L}(g)||^2,
+
     L from f^P_{W_L}(g) - f^P_{W_L}(b).
 
     As in the thesis's release, the head outputs are scaled to unit length first:

@@ -35,9 +35,11 @@ OBJECTIVES_BY_KIND = {"positional": ("ranking",), "directional": ("directional",
 POSITIONAL: dict[str, RewardFunction] = {}
 #: Directional reward functions r_D by name.
 DIRECTIONAL: dict[str, RewardFunction] = {}
-#: The image-head layout of every registered reward, by name (one of :data:`IMAGE_LAYOUTS`).
+#: The image-head layout of every registered reward, by name (one of
+#: :data:`~temporal_torchrl.rewards.registry.IMAGE_LAYOUTS`).
 IMAGE_INPUTS: dict[str, str | None] = {}
-#: The finetuning objective of every registered reward, by name (see :data:`OBJECTIVES_BY_KIND`).
+#: The finetuning objective of every registered reward, by name (see
+#: :data:`~temporal_torchrl.rewards.registry.OBJECTIVES_BY_KIND`).
 OBJECTIVES: dict[str, str] = {}
 
 _REGISTRIES = {"positional": POSITIONAL, "directional": DIRECTIONAL}

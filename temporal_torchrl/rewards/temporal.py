@@ -60,15 +60,15 @@ class TemporalReward(nn.Module):
             certainty loss (d_certainty) and by ``certainty_scaling``.
         certainty_scaling: the multiplicative option of the thesis's section 6.4 proposal
             (beyond the thesis): the directional reward that :meth:`forward` returns is
-            |t(s_t, Δs_t)| r_D, with t from the references of the last finetuning batch
+            ``|t(s_t, Δs_t)|`` r_D, with t from the references of the last finetuning batch
             (:attr:`certainty`). :meth:`directional_reward`, which the finetuning losses call,
             stays unscaled: the heads are trained as they are (the "step function"), the
             factor only shapes the reward the agent sees.
 
     Attributes:
-        positional_heads, directional_heads: the trainable :class:`RewardHeads` (f^P, f^D), or None
-            when that part is absent or zero-shot (registered with ``image_input=None``, like
-            ``"liv"``).
+        positional_heads: the trainable :class:`RewardHeads` f^P, or None when that part is
+            absent or zero-shot (registered with ``image_input=None``, like ``"liv"``).
+        directional_heads: the trainable :class:`RewardHeads` f^D, or None likewise.
         window_length: K when a part reads the window (registered with ``image_input="window"``),
             else None: the history transform and the replay buffer need no window.
         certainty: the :class:`~temporal_torchrl.rewards.certainty.CertaintyMemory` of
@@ -230,7 +230,7 @@ class TemporalReward(nn.Module):
         ``window`` ``[..., K, D]`` when a part reads it).
 
         Returns a dict with ``"task_reward"`` (success - 1), ``"positional_reward"`` (r_P),
-        ``"directional_reward"`` (r_D, times |t(s_t, Δs_t)| with ``certainty_scaling``),
+        ``"directional_reward"`` (r_D, times ``|t(s_t, Δs_t)|`` with ``certainty_scaling``),
         ``"vlm_reward"`` (r_P + lambda r_D) and ``"reward"`` (r_task + rho vlm), each float32
         ``[..., 1]``; an absent part is 0.
         """

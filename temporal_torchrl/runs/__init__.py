@@ -1,8 +1,11 @@
-"""What a training run is, outside the loop that trains it: its directory and files
-(:mod:`.directory`, :mod:`.layout`), its name (:mod:`.naming`), how it resumes and how sweep jobs
-find it (:mod:`.resume`), its reward from its config (:mod:`.reward`), and reading it back
-(:mod:`.readers`). The recipe writes runs
-through this package and the reports read them through it."""
+"""What a training run is, outside the loop that trains it.
+
+Its directory and files (:mod:`~temporal_torchrl.runs.directory`,
+:mod:`~temporal_torchrl.runs.layout`), its name (:mod:`~temporal_torchrl.runs.naming`), how it
+resumes and how sweep jobs find it (:mod:`~temporal_torchrl.runs.resume`), its reward from its
+config (:mod:`~temporal_torchrl.runs.reward`), and reading it back
+(:mod:`~temporal_torchrl.runs.readers`). The recipe writes runs through this package and the
+reports read them through it."""
 
 from temporal_torchrl.runs.directory import (
     LOCK,

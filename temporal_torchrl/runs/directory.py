@@ -198,7 +198,7 @@ class RunDirectory:
                     pass
 
     def locked_by(self) -> str | None:
-        """Who holds the run's lock (as :attr:`RunLockedError.holder`), None when no live process
+        """Who holds the run's lock (as ``RunLockedError.holder``), None when no live process
         does. A probe: the answer may change as soon as it is given."""
         if not (self.path / LOCK).exists():
             return None

@@ -1,6 +1,6 @@
 """A run directory's file names and a run's protocol names: the one place that defines them.
 
-:class:`~temporal_torchrl.training.RunDirectory` writes these files; the reports read them.
+:class:`~temporal_torchrl.runs.RunDirectory` writes these files; the reports read them.
 """
 
 from __future__ import annotations

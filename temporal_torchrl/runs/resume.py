@@ -23,7 +23,7 @@ def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
     checkpoint is there (a re-launched sweep continues its runs, finished ones return at once),
     restarted when the job died before its first checkpoint, and torch threads set so that
     parallel jobs share the cores instead of oversubscribing them. A run a live process is
-    writing is left as it is: :func:`train` then stops on its lock (``RunLockedError``)."""
+    writing is left as it is: the recipe's ``train`` then stops on its lock (``RunLockedError``)."""
     cfg = copy.deepcopy(cfg)
     if cfg.runs_dir is None:
         cfg.runs_dir = hydra_config.sweep.dir

@@ -34,10 +34,12 @@ class EmbeddingHistoryTransform(Transform):
     Place it after the embedding transform, and on the outer env of a batched env.
 
     Args:
-        k: history offset (>= 1); use the ``k`` of the :class:`TemporalReward`.
+        k: history offset (>= 1); use the ``k`` of the
+            :class:`~temporal_torchrl.rewards.TemporalReward`.
         in_key: the embedding key to track.
         window_length: K (>= 2), or None for no window; use the ``window_length`` of the
-            :class:`TemporalReward` (None unless its reward reads a window).
+            :class:`~temporal_torchrl.rewards.TemporalReward` (None unless its reward reads a
+            window).
 
     Example:
         >>> import torch
