@@ -71,7 +71,9 @@ intersphinx_mapping = {
 # Third-party types the public signatures name and that no inventory here can resolve:
 # omegaconf.DictConfig (the recipe's config; omegaconf.dictconfig.DictConfig in signatures) and
 # mujoco.MjModel (mujoco._structs.MjModel). Never the package's own names.
-nitpick_ignore_regex = [(r"py:.*", r"(omegaconf|mujoco)(\..*)?")]
+nitpick_ignore_regex = [(r"py:.*", r"(omegaconf|mujoco)(\..*)?"),
+                        # dataclass fields' string annotations (the configs), split at a comma
+                        (r"py:class", r"dict\[str")]
 if ONLINE:
     intersphinx_mapping |= {
         "torch": ("https://docs.pytorch.org/docs/stable", None),
