@@ -1,15 +1,5 @@
-"""Zero-shot value-order correlation of image/text encoders on the six held-out evaluation tasks.
-
-For each evaluation task, expert episodes (frames o_0 .. o_T, the last a few steps after the
-first success) are embedded, and two rank correlations are computed per episode:
-
-- text-goal rho: Spearman correlation between the frame index t and
-  ``csim(phi(o_t), psi(l_g))`` with ``l_g`` the task's goal prompt (LIV's zero-shot reward);
-- image-goal rho: the same with the episode's last frame as the goal, ``csim(phi(o_t), phi(o_T))``.
-
-An encoder whose similarity rises monotonically along successful episodes scores 1.
-
-Run on its own (the pretraining recipe calls :func:`evaluate_encoders` at its end):
+"""Zero-shot value-order correlation of image/text encoders on the six held-out evaluation tasks
+(what it measures: :mod:`temporal_torchrl.encoders.evaluation`).
 
     python recipes/evaluate_encoder.py                      # shipped small encoder vs baselines
     python recipes/evaluate_encoder.py --liv-checkpoint model.pt   # adds real LIV

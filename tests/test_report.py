@@ -15,6 +15,7 @@ import pytest
 import report
 import sac_temporal
 import torch
+from helpers import config
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
@@ -612,13 +613,8 @@ def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
     from temporal_torchrl.training import factories
 
     run_dir = tmp_path / "run"
-    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
-        cfg = compose("config", overrides=[
-            "env.max_episode_steps=20", "train.episodes=2", "train.random_steps=10",
-            "encoder.name=state", "+encoder.options.dim=16", "sac.batch_size=16",
-            "sac.hidden_sizes=[32,32]", "reward.batch_size=16", "reward.gap=3",
-            "logger.backend=none", "train.progress=false", "protocol=stage2",
-            "train.preload_positives=1", *overrides, f"output_dir={run_dir}"])
+    cfg = config(tmp_path, "train.episodes=2", "protocol=stage2", "train.preload_positives=1",
+                 *overrides)
     sac_temporal.train(cfg)
     expert, failed = reward_curves(run_dir)
     trained = factories.make_reward(cfg, load_encoder("state", dim=16))

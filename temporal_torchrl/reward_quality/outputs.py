@@ -161,7 +161,8 @@ def plot_variant_curves(path: str | Path, title: str, positive: Mapping[str, Ten
                        ylabel: str = "reward") -> None:
     """A PNG in the style of the thesis's Figure 5.12: one reward variant along one successful
     (blue) and one failed (orange) episode, one curve per label (finetuned, untrained heads).
-    The training runs' r_P and r_D curves are :func:`temporal_torchrl.reports.plots.plot_reward_curves`.
+    A training run's r_P and r_D curves are
+    :func:`temporal_torchrl.reports.plots.plot_reward_curves`.
 
     Args:
         path: the PNG to write.

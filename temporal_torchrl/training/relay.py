@@ -176,7 +176,8 @@ class RelayExploration:
         self.policy = policy
         self.loss = loss
         self.optimizer = optimizer
-        self._update = update
+        #: One SAC step of the relay agent on a :meth:`task_reward_batch`.
+        self.update = update
 
     @property
     def schedule(self) -> RelaySchedule:
@@ -189,9 +190,6 @@ class RelayExploration:
         relay_batch = batch.clone(False)
         relay_batch["next", "reward"] = batch["next", "success"].float() - 1.0
         return relay_batch
-
-    def update(self, relay_batch: TensorDictBase) -> TensorDictBase:
-        return self._update(relay_batch)
 
     def state_dict(self) -> dict[str, Any]:
         return {"schedule": self.schedule.state_dict(), "loss": self.loss.state_dict(),

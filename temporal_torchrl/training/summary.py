@@ -7,11 +7,8 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from temporal_torchrl.envs import get_task
-from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, ras, tt50s, ttfs
+from temporal_torchrl.protocol_metrics import DEFAULT_HORIZON, DEFAULT_WINDOW, ras, tt50s, ttfs
 from temporal_torchrl.training.state import TrainingProgress
-
-#: RAS's running-average window (thesis 5.1), shortened to a budget below it.
-RAS_WINDOW = 150
 
 
 def run_summary(cfg: DictConfig, progress: TrainingProgress, *, steps_per_second: float,
@@ -21,7 +18,8 @@ def run_summary(cfg: DictConfig, progress: TrainingProgress, *, steps_per_second
     metrics and the resolved config."""
     successes = progress.successes
     budget = get_task(cfg.env.task).ras_budget
-    window = min(RAS_WINDOW, budget) if budget else RAS_WINDOW
+    # RAS's window (thesis 5.1), shortened to a budget below it
+    window = min(DEFAULT_WINDOW, budget) if budget else DEFAULT_WINDOW
     return {
         "ttfs": ttfs(successes), "tt50s": tt50s(successes), "horizon": DEFAULT_HORIZON,
         "ras": {"value": ras(successes, budget, window) if budget else None,
