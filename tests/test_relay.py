@@ -94,21 +94,32 @@ def test_stage_one_run_relays_every_other_episode(tmp_path, monkeypatch):
     relay agent learns from the VLM agent's batches with their sparse task reward."""
     from torchrl.objectives import SACLoss
 
+    from temporal_torchrl.data import EpisodeReplayBuffer
+
     batches: dict[int, list] = {}
     forward = SACLoss.forward
 
     def recording_forward(self, tensordict):
         batches.setdefault(id(self), []).append(tensordict.select(
-            "observation", ("next", "reward"), ("next", "success")).clone())
+            "observation", ("next", "reward")).clone())
         return forward(self, tensordict)
 
+    sampled = []
+    sample = EpisodeReplayBuffer.sample
+
+    def recording_sample(self, *args, **kwargs):
+        batch = sample(self, *args, **kwargs)
+        sampled.append(batch["next", "success"].clone())
+        return batch
+
     monkeypatch.setattr(SACLoss, "forward", recording_forward)
+    monkeypatch.setattr(EpisodeReplayBuffer, "sample", recording_sample)
     summary = sac_temporal.train(config(tmp_path, "logger.backend=csv", "logger.log_every=5"))
     vlm, relay = batches.values()  # the VLM agent's loss is built (and called) first
-    assert len(vlm) == len(relay) == 40
-    for own, theirs in zip(vlm, relay, strict=True):
+    assert len(vlm) == len(relay) == len(sampled) == 40
+    for own, theirs, success in zip(vlm, relay, sampled, strict=True):
         assert torch.equal(own["observation"], theirs["observation"])
-        assert torch.equal(theirs["next", "reward"], theirs["next", "success"].float() - 1.0)
+        assert torch.equal(theirs["next", "reward"], success.float() - 1.0)
         assert not torch.equal(own["next", "reward"], theirs["next", "reward"])
     assert summary["relay_steps"] == 20
     fractions = next((tmp_path / "run" / "logs").rglob("train/relay_fraction.csv"))

@@ -109,6 +109,48 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path, monkeypatch):
         torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
 
 
+def test_cpu_sac_update_matches_torchrls_vmap_update(tmp_path):
+    """The recipe's CPU SAC update (the twin critics one after the other, only SAC's keys)
+    against TorchRL's SACLoss as its docs build it (vmap over the critics, the whole batch) and
+    a plain Adam: the same losses and parameters after 3 updates on the same batches."""
+    from torchrl.objectives import SACLoss, SoftUpdate
+
+    cfg = config(tmp_path, "reward.directional=d3")
+    env = factories.make_environment(cfg, None, None)
+    batches = [env.rollout(16, break_when_any_done=False) for _ in range(3)]
+
+    torch.manual_seed(0)
+    actor, qvalue = factories.make_sac_agent(cfg, env)
+    loss, updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
+    assert loss.deactivate_vmap
+    update = factories.make_sac_update(cfg, loss, updater, optimizer)
+    torch.manual_seed(1)
+    fast = [update(batch.clone())["loss_qvalue"] for batch in batches]
+
+    torch.manual_seed(0)
+    actor, qvalue = factories.make_sac_agent(cfg, env)
+    reference = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2",
+                        alpha_init=cfg.sac.alpha_init, target_entropy=-2.0, delay_qvalue=True)
+    reference.make_value_estimator(gamma=cfg.sac.gamma)
+    target = SoftUpdate(reference, tau=cfg.sac.tau)
+    adam = torch.optim.Adam(reference.parameters(), lr=cfg.sac.lr)
+    torch.manual_seed(1)
+    expected = []
+    for batch in batches:
+        losses = reference(batch.clone())
+        (losses["loss_actor"] + losses["loss_qvalue"] + losses["loss_alpha"]).backward()
+        adam.step()
+        adam.zero_grad()
+        target.step()
+        expected.append(losses["loss_qvalue"].detach())
+    env.close()
+    for value, reference_value in zip(fast, expected, strict=True):
+        torch.testing.assert_close(value, reference_value, rtol=1e-5, atol=1e-6)
+    for parameter, reference_parameter in zip(loss.parameters(), reference.parameters(),
+                                              strict=True):
+        torch.testing.assert_close(parameter, reference_parameter, rtol=1e-5, atol=1e-6)
+
+
 def test_rendering_workers_embed_their_own_frames():
     """Each worker renders (EGL) its own env; one encoder forward embeds both frames, which
     match the single-env pipeline's frame after the same first action."""

@@ -74,25 +74,31 @@ def test_stage_two_positional_loss_is_the_thesis_ranking_loss():
 
 
 def test_one_update_is_one_adam_step_on_each_loss():
-    """Adam's first step moves every parameter by lr * g / (|g| + eps) against its gradient."""
+    """Adam's first step moves every parameter by lr * g / (|g| + eps) against its gradient,
+    the gradient of its own loss alone (the trainer takes one backward of their sum)."""
     buffer = filled_buffer()
+    buffer.extend(episode_rows(make_episode(1, 20, successes=(12,)),
+                               embedding_dtype=torch.float32))
     trainer = make_trainer(buffer)
-    loss = trainer.losses[0]
-    before = [parameter.detach().clone() for parameter in loss.parameters()]
+    before = {id(loss): [parameter.detach().clone() for parameter in loss.parameters()]
+              for loss in trainer.losses}
     torch.manual_seed(3)
     batch = buffer.finetuning.sample(8)
-    gradients = torch.autograd.grad(loss(batch)["loss_positional"], list(loss.parameters()),
-                                    allow_unused=True)
+    gradients = {id(loss): torch.autograd.grad(loss(batch)[loss.loss_key],
+                                               list(loss.parameters()), allow_unused=True)
+                 for loss in trainer.losses}
     torch.manual_seed(3)
     trainer.update()
-    moved = 0
-    for old, new, gradient in zip(before, loss.parameters(), gradients, strict=True):
-        if gradient is None:
-            continue
-        expected = old - LR * gradient / (gradient.abs() + 1e-8)
-        torch.testing.assert_close(new.detach(), expected, atol=1e-6, rtol=1e-5)
-        moved += int((gradient != 0).sum())
-    assert moved > 0
+    for loss in trainer.losses:
+        moved = 0
+        for old, new, gradient in zip(before[id(loss)], loss.parameters(), gradients[id(loss)],
+                                      strict=True):
+            if gradient is None:
+                continue
+            expected = old - LR * gradient / (gradient.abs() + 1e-8)
+            torch.testing.assert_close(new.detach(), expected, atol=1e-6, rtol=1e-5)
+            moved += int((gradient != 0).sum())
+        assert moved > 0, loss.loss_key
 
 
 def test_restored_trainer_continues_like_the_uninterrupted_one():

@@ -27,6 +27,9 @@ or text embeddings, so it can never drift from the reward the agent is trained o
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
@@ -108,23 +111,22 @@ class PositionalRankingLoss(LossModule):
         zero = self.goal_image_embedding.new_zeros(())
         parts = {}
         stage = 2 if "positive" in tensordict.keys() else 1
-        negative = tensordict.get("negative", None)
-        rewards_negative = self.positional_reward(negative) if negative is not None else None
-        if stage == 1 and negative is not None:
-            distance = (negative["embedding"] - self.goal_image_embedding).norm(dim=-1)
+        groups = {name: states for name, states in _state_groups(tensordict).items()
+                  if stage == 2 or name == "negative"}
+        rewards = _split_call(self.positional_reward, groups, POSITIONAL_KEYS)
+        if stage == 1 and "negative" in rewards:
+            distance = (groups["negative"]["embedding"]
+                        - self.goal_image_embedding).norm(dim=-1)
             closer = (distance.unsqueeze(1) - distance.unsqueeze(0)) < -self.l2_margin
-            pairwise = ranking_loss(rewards_negative.unsqueeze(1), rewards_negative.unsqueeze(0),
-                                    self.delta)
+            pairwise = ranking_loss(rewards["negative"].unsqueeze(1),
+                                    rewards["negative"].unsqueeze(0), self.delta)
             parts["loss_neg_neg"] = (pairwise * closer).sum(1).mean()
         if stage == 2:
-            rewards_positive = self.positional_reward(tensordict["positive"])
-            if rewards_negative is not None:
-                parts["loss_pos_neg"] = ranking_loss(rewards_positive, rewards_negative,
+            if "negative" in rewards:
+                parts["loss_pos_neg"] = ranking_loss(rewards["positive"], rewards["negative"],
                                                      self.delta).mean()
-            pair = tensordict.get("positive_pair", None)
-            if pair is not None:
-                parts["loss_pos_pos"] = ranking_loss(self.positional_reward(pair["later"]),
-                                                     self.positional_reward(pair["earlier"]),
+            if "later" in rewards:
+                parts["loss_pos_pos"] = ranking_loss(rewards["later"], rewards["earlier"],
                                                      self.delta).mean()
         total = sum(parts.values(), zero)
         out = {name: value.detach() for name, value in parts.items()}
@@ -192,34 +194,81 @@ class DirectionalLoss(LossModule):
         remember_certainty_references(self.reward, tensordict)
         # The release scores the contrasted direction at the plain position n(s_t): D3's input.
         variant = self.reward.directional
-        contrast_variant = "d3" if not self.same_position and variant in ("d4", "d5") else None
+        contrast_variant = "d3" if not self.same_position and variant in ("d4", "d5") else variant
         length = self.reward.window_length
-        parts = {}
         stage = 2 if "positive" in tensordict.keys() else 1
+        terms: dict[str, _DirectionTerm] = {}
         negative = tensordict.get("negative", None)
         if negative is not None:
-            s_t, s_tk = negative["embedding"], negative["previous_embedding"]
+            s_t = negative["embedding"]
             s_g = self.goal_image_embedding.expand_as(s_t)
             window = _window(negative, length)
-            observed = self.directional_reward(s_t, s_tk, negative, window=window)
-            towards_goal = self.directional_reward(
-                s_g, s_t, negative, position=s_t, variant=contrast_variant,
-                window=None if window is None else straight_window(s_t, s_g, length))
-            parts["loss_negative"] = (observed - towards_goal).mean()
+            terms["negative_observed"] = _DirectionTerm.observed(negative, variant, window)
+            terms["towards_goal"] = _DirectionTerm(
+                contrast_variant, s_g, s_t, negative["initial_embedding"], s_t,
+                None if window is None else straight_window(s_t, s_g, length))
         if stage == 2:
             positive = tensordict["positive"]
             s_t, s_tk = positive["embedding"], positive["previous_embedding"]
             window = _window(positive, length)
-            observed = self.directional_reward(s_t, s_tk, positive, window=window)
-            opposite = self.directional_reward(
-                s_tk, s_t, positive, position=s_t, variant=contrast_variant,
-                window=None if window is None else window.flip(-2))
-            parts["loss_positive"] = (opposite - observed).mean()
+            terms["positive_observed"] = _DirectionTerm.observed(positive, variant, window)
+            terms["opposite"] = _DirectionTerm(
+                contrast_variant, s_tk, s_t, positive["initial_embedding"], s_t,
+                None if window is None else window.flip(-2))
+        rewards = self._score(terms)
+        parts = {}
+        if negative is not None:
+            parts["loss_negative"] = (rewards["negative_observed"].mean()
+                                      - rewards["towards_goal"].mean())
+        if stage == 2:
+            parts["loss_positive"] = (rewards["opposite"].mean()
+                                      - rewards["positive_observed"].mean())
         total = sum(parts.values(), self.goal_image_embedding.new_zeros(()))
         out = {name: value.detach() for name, value in parts.items()}
         out["loss_directional"] = total
         out["stage"] = torch.tensor(stage)
         return TensorDict(out, [])
+
+    def _score(self, terms: dict[str, _DirectionTerm]) -> dict[str, Tensor]:
+        """r_D of every term, with one reward call per variant: the heads see the terms as one
+        batch (one matrix product per layer instead of one per term)."""
+        rewards: dict[str, Tensor] = {}
+        for variant in dict.fromkeys(term.variant for term in terms.values()):
+            names = [name for name, term in terms.items() if term.variant == variant]
+            chosen = [terms[name] for name in names]
+
+            def joined(field: str, chosen: list[_DirectionTerm] = chosen) -> Tensor | None:
+                values = [getattr(term, field) for term in chosen]
+                return None if values[0] is None else torch.cat(values)
+
+            scores = self.reward.directional_reward(
+                joined("end"), joined("start"), joined("initial"), position=joined("position"),
+                variant=variant, window=joined("window"))
+            rewards.update(zip(names, scores.split([term.end.shape[0] for term in chosen]),
+                               strict=True))
+        return rewards
+
+
+@dataclass(frozen=True)
+class _DirectionTerm:
+    """One term of the directional loss: r_D of the direction ``end - start`` (or the path
+    ``window``) at ``position``, scored by ``variant``."""
+
+    variant: str
+    end: Tensor
+    start: Tensor
+    initial: Tensor
+    position: Tensor
+    window: Tensor | None
+
+    @classmethod
+    def observed(cls, states: TensorDictBase, variant: str,
+                 window: Tensor | None) -> _DirectionTerm:
+        """The observed direction s_t - s_{t-k} (or window W_t) at the variant's own default
+        position: s_t, or the window's newest embedding."""
+        s_t = states["embedding"]
+        return cls(variant, s_t, states["previous_embedding"], states["initial_embedding"],
+                   s_t if window is None else window[..., -1, :], window)
 
 
 class CertaintyLoss(LossModule):
@@ -357,6 +406,32 @@ def _references(groups: dict[str, TensorDictBase]) -> tuple[Tensor, Tensor, Tens
     labels = torch.cat([torch.full((states.shape[0],), 1.0 if name == "positive" else -1.0)
                         for name, states in groups.items()])
     return positions, directions, labels.to(positions.device)
+
+
+#: The state keys a positional reward reads.
+POSITIONAL_KEYS = ("embedding", "initial_embedding", "previous_embedding")
+
+
+def _state_groups(tensordict: TensorDictBase) -> dict[str, TensorDictBase]:
+    """The batch's groups of states by name: ``negative``, ``positive`` and the pair's
+    ``later`` and ``earlier``, those present."""
+    groups = {name: tensordict[name] for name in ("negative", "positive")
+              if name in tensordict.keys()}
+    pair = tensordict.get("positive_pair", None)
+    if pair is not None:
+        groups.update(later=pair["later"], earlier=pair["earlier"])
+    return groups
+
+
+def _split_call(function: Callable[[TensorDictBase], Tensor],
+                groups: dict[str, TensorDictBase], keys: tuple[str, ...]) -> dict[str, Tensor]:
+    """``function`` of every group, called once on the groups' ``keys`` concatenated: one batch
+    through the heads instead of one per group (the heads treat each state on its own)."""
+    if not groups:
+        return {}
+    joined = torch.cat([states.select(*keys) for states in groups.values()])
+    values = function(joined).split([states.shape[0] for states in groups.values()])
+    return dict(zip(groups, values, strict=True))
 
 
 def _window(states: TensorDictBase, length: int | None) -> Tensor | None:

@@ -251,9 +251,13 @@ def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOpera
                   action_dim: int) -> tuple[SACLoss, SoftUpdate, torch.optim.Optimizer]:
     target_entropy = (-action_dim / 2 if cfg.sac.target_entropy is None
                       else float(cfg.sac.target_entropy))
+    # On a CPU the twin critics run faster one after the other than through vmap, which
+    # batches small matrix products badly there (benchmarks/README.md, "SAC update"); a GPU
+    # keeps vmap's batched kernels.
     loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2",
                    alpha_init=cfg.sac.alpha_init, target_entropy=target_entropy,
-                   delay_qvalue=True)
+                   delay_qvalue=True,
+                   deactivate_vmap=resolve_device(cfg.train.device).type == "cpu")
     loss.make_value_estimator(gamma=cfg.sac.gamma)
     target_updater = SoftUpdate(loss, tau=cfg.sac.tau)
     # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on CPU;
@@ -267,8 +271,12 @@ def make_sac_update(cfg: DictConfig, loss: SACLoss, target_updater: SoftUpdate,
                     optimizer: torch.optim.Optimizer) -> Callable[[TensorDict], TensorDict]:
     """One SAC step on a batch: losses, backward, Adam, target update; returns the detached
     losses, alpha and entropy. Compiled (``compile.*``) as in TorchRL's SAC recipe."""
+    keys = loss.in_keys
+
     def update(batch: TensorDict) -> TensorDict:
-        loss_td = loss(batch)
+        # Only SAC's keys: the loss copies its input on the way, and a replay batch also
+        # carries the step, the episode and the relabelled reward's parts.
+        loss_td = loss(batch.select(*keys))
         (loss_td["loss_actor"] + loss_td["loss_qvalue"] + loss_td["loss_alpha"]).backward()
         optimizer.step()
         optimizer.zero_grad(set_to_none=True)

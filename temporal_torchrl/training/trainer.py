@@ -81,17 +81,21 @@ class RewardHeadTrainer:
     def update(self) -> TensorDict:
         """One finetuning batch, one step per loss; returns the loss terms and the ``stage``."""
         batch = self.replay.sample(self.batch_size)
-        metrics = TensorDict({}, [])
-        for loss, forward, optimizer in zip(self.losses, self._forwards, self.optimizers,
-                                            strict=True):
-            loss_td = forward(batch)
-            value = loss_td[loss.loss_key]
-            if value.requires_grad:
+        outputs = [forward(batch) for forward in self._forwards]
+        trained = [out[loss.loss_key] for loss, out in zip(self.losses, outputs, strict=True)
+                   if out[loss.loss_key].requires_grad]
+        if trained:
+            for optimizer in self.optimizers:
                 optimizer.zero_grad(set_to_none=True)
-                value.backward()
+            # The losses own disjoint heads: one backward of their sum gives each loss's heads
+            # the gradients of its own loss, in one pass of the autograd engine.
+            torch.stack(trained).sum().backward()
+            for optimizer in self.optimizers:  # Adam skips the heads a loss left without grad
                 optimizer.step()
-            metrics.update(loss_td.detach())
-        metrics["stage"] = torch.tensor(float(self.stage))
+        metrics = TensorDict({}, [])
+        for out in outputs:
+            metrics.update(out.detach())
+        metrics["stage"] = torch.tensor(2.0 if "positive" in batch.keys() else 1.0)
         return metrics
 
     def state_dict(self) -> dict[str, Any]:
