@@ -66,25 +66,32 @@ def test_sac_loss_receives_the_relabelled_rewards(tmp_path, monkeypatch):
     make_reward = factories.make_reward
     monkeypatch.setattr(factories, "make_reward",
                         lambda *args: made.append(make_reward(*args)) or made[-1])
-    checked = []
+    expected, received = [], []
+    sample = EpisodeReplayBuffer.sample
+
+    def recording_sample(self, *args, **kwargs):
+        # Sampled right before its SAC update, after the heads' update: the heads of that update.
+        batch = sample(self, *args, **kwargs)
+        with torch.no_grad():
+            expected.append((furl_plus_d3(made[0], batch["next"]),
+                             batch["next", "success"].float().squeeze(-1) - 1.0))
+        return batch
+
     forward = SACLoss.forward
 
     def recording_forward(self, tensordict):
-        reward = made[0]
-        with torch.no_grad():
-            expected = furl_plus_d3(reward, tensordict["next"])
-        checked.append((tensordict["next", "reward"].squeeze(-1).clone(), expected,
-                        tensordict["next", "success"].float().squeeze(-1) - 1.0))
+        received.append(tensordict["next", "reward"].squeeze(-1).clone())
         return forward(self, tensordict)
 
+    monkeypatch.setattr(EpisodeReplayBuffer, "sample", recording_sample)
     monkeypatch.setattr(SACLoss, "forward", recording_forward)
     # No relay: its agent's SACLoss learns from the sparse reward (tests/test_relay.py)
     sac_temporal.train(config(tmp_path, "reward.directional=d3", "reward.rho=1.0",
                               "reward.lambda_=4.0", "train.episodes=2", "train.relay=false"))
-    assert len(checked) == 20  # one update per step once the first episode is stored
-    for received, expected, task in checked:
-        torch.testing.assert_close(received, expected)
-        assert (received - task).abs().min() > 0  # the VLM part is there
+    assert len(received) == len(expected) == 20  # one update per step after the 1st episode
+    for rewards, (relabelled, task) in zip(received, expected, strict=True):
+        torch.testing.assert_close(rewards, relabelled)
+        assert (rewards - task).abs().min() > 0  # the VLM part is there
 
 
 def test_a_registered_reward_sees_the_same_history_everywhere(tmp_path):

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from temporal_torchrl.rewards import (
     DIRECTIONAL,
@@ -507,6 +508,23 @@ def test_d_sequence_with_two_embeddings_reads_d3_inputs():
                                d3_input(s_t, s_g - s_t))
     torch.testing.assert_close(window_tokens(observed.flip(-2), position=s_t),
                                d3_input(s_t, s_prev - s_t))
+
+
+def test_d_sequence_is_csim_of_the_sequence_encoder_over_its_tokens(embeddings):
+    """d_sequence embeds n(s_t) once per window (SequenceEncoder.forward_with_context): the
+    same reward as the encoder run on the concatenated tokens of window_tokens, written out as
+    r = csim(f_I(x_1 .. x_(K-1)), f_L(g - b)), at the default and at another position."""
+    s, _, s_prev, _, g, b = embeddings
+    heads = make_heads("d_sequence")
+    window = path(s, s_prev)
+    for position in (None, s_prev):
+        expected = F.cosine_similarity(heads.image(window_tokens(window, position)),
+                                       heads.text(g - b).expand(BATCH, -1), dim=-1)
+        torch.testing.assert_close(
+            DIRECTIONAL["d_sequence"](heads, s, window=window, g=g, b=b, position=position),
+            expected, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="a context of size 3"):
+        heads.image.forward_with_context(torch.zeros(BATCH, 3), window_tokens(window))
 
 
 def test_d_sequence_reads_the_order_of_the_steps(embeddings):

@@ -230,20 +230,29 @@ class DirectionalLoss(LossModule):
         return TensorDict(out, [])
 
     def _score(self, terms: dict[str, _DirectionTerm]) -> dict[str, Tensor]:
-        """r_D of every term, with one reward call per variant: the heads see the terms as one
-        batch (one matrix product per layer instead of one per term)."""
+        """r_D of every term, with one reward call per variant for the observed terms (the
+        variant's own default position) and one for the contrasted ones (at s_t): the heads see
+        the groups' states as one batch. Window terms are scored one by one: joining their
+        windows ([B, K, D] each) would copy more than it saves."""
+        if self.reward.window_length is not None:
+            calls = [[name] for name in terms]
+        else:
+            kinds = {name: (term.variant, term.position is None) for name, term in terms.items()}
+            calls = [[name for name in terms if kinds[name] == kind]
+                     for kind in dict.fromkeys(kinds.values())]
         rewards: dict[str, Tensor] = {}
-        for variant in dict.fromkeys(term.variant for term in terms.values()):
-            names = [name for name, term in terms.items() if term.variant == variant]
+        for names in calls:
             chosen = [terms[name] for name in names]
 
             def joined(field: str, chosen: list[_DirectionTerm] = chosen) -> Tensor | None:
                 values = [getattr(term, field) for term in chosen]
-                return None if values[0] is None else torch.cat(values)
+                if values[0] is None or len(values) == 1:
+                    return values[0]
+                return torch.cat(values)
 
             scores = self.reward.directional_reward(
                 joined("end"), joined("start"), joined("initial"), position=joined("position"),
-                variant=variant, window=joined("window"))
+                variant=chosen[0].variant, window=joined("window"))
             rewards.update(zip(names, scores.split([term.end.shape[0] for term in chosen]),
                                strict=True))
         return rewards
@@ -252,23 +261,22 @@ class DirectionalLoss(LossModule):
 @dataclass(frozen=True)
 class _DirectionTerm:
     """One term of the directional loss: r_D of the direction ``end - start`` (or the path
-    ``window``) at ``position``, scored by ``variant``."""
+    ``window``) at ``position`` (None: the variant's default), scored by ``variant``."""
 
     variant: str
     end: Tensor
     start: Tensor
     initial: Tensor
-    position: Tensor
+    position: Tensor | None
     window: Tensor | None
 
     @classmethod
     def observed(cls, states: TensorDictBase, variant: str,
                  window: Tensor | None) -> _DirectionTerm:
-        """The observed direction s_t - s_{t-k} (or window W_t) at the variant's own default
-        position: s_t, or the window's newest embedding."""
-        s_t = states["embedding"]
-        return cls(variant, s_t, states["previous_embedding"], states["initial_embedding"],
-                   s_t if window is None else window[..., -1, :], window)
+        """The observed direction s_t - s_{t-k} (or window W_t) at the variant's default
+        position."""
+        return cls(variant, states["embedding"], states["previous_embedding"],
+                   states["initial_embedding"], None, window)
 
 
 class CertaintyLoss(LossModule):

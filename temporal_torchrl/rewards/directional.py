@@ -162,7 +162,11 @@ def d_sequence(heads: RewardHeads, s: Tensor, *, window: Tensor | None = None, g
     ``s`` and ``s_prev`` are not read: the window carries the direction.
     """
     window = _required(window, "window", "d_sequence")
-    return cosine_similarity(heads.image(window_tokens(window, position)), heads.text(g - b))
+    position = window[..., -1, :] if position is None else position
+    steps = unit(window[..., 1:, :] - window[..., :-1, :])
+    # heads.image(window_tokens(window, position)), with n(s_t) embedded once per window
+    return cosine_similarity(heads.image.forward_with_context(unit(position), steps),
+                             heads.text(g - b))
 
 
 # The built-in directional rewards, into DIRECTIONAL; d3-d5 read position ⊕ direction (2·D),

@@ -9,6 +9,7 @@ read a window of embeddings (beyond the thesis, section 6.3 proposal) get a smal
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from temporal_torchrl.rewards.registry import IMAGE_INPUTS, image_input_of
@@ -69,10 +70,33 @@ class SequenceEncoder(nn.Module):
             raise ValueError(f"SequenceEncoder: tokens of shape {tuple(tokens.shape)}; expected "
                              f"[..., {self.length}, {self.token_dim}] (a window of "
                              f"{self.length + 1} embeddings).")
-        batch = tokens.shape[:-2]
-        hidden = self.embed(tokens.reshape(-1, self.length, self.token_dim))
-        hidden = self.layer(hidden + self.position_embedding).mean(-2)
-        return self.output(hidden).reshape(*batch, -1)
+        return self._encode(self.embed(tokens))
+
+    def forward_with_context(self, context: Tensor, tokens: Tensor) -> Tensor:
+        """:meth:`forward` of the tokens ``context ⊕ tokens_j``, j = 1 .. L, for one
+        ``context [..., C]`` shared by a sequence's ``tokens [..., L, token_dim - C]``.
+
+        The same function, cheaper: W_e splits into the columns that read the context and
+        those that read the token, so the context's share of the token embedding is computed
+        once per sequence instead of once per token, and the tokens are never concatenated.
+        """
+        context_dim = context.shape[-1]
+        if tokens.shape[-2] != self.length or context_dim + tokens.shape[-1] != self.token_dim:
+            raise ValueError(f"SequenceEncoder: a context of size {context_dim} and tokens of "
+                             f"shape {tuple(tokens.shape)}; expected [..., {self.length}, "
+                             f"{self.token_dim}] together (a window of {self.length + 1} "
+                             "embeddings).")
+        context_weight, token_weight = self.embed.weight.split(
+            [context_dim, self.token_dim - context_dim], dim=-1)
+        hidden = (F.linear(tokens, token_weight, self.embed.bias)
+                  + F.linear(context, context_weight).unsqueeze(-2))
+        return self._encode(hidden)
+
+    def _encode(self, hidden: Tensor) -> Tensor:
+        """Embedded tokens ``[..., L, width]`` -> ``[..., out_dim]``."""
+        batch, width = hidden.shape[:-2], hidden.shape[-1]
+        hidden = hidden.reshape(-1, self.length, width) + self.position_embedding
+        return self.output(self.layer(hidden).mean(-2)).reshape(*batch, -1)
 
     def extra_repr(self) -> str:
         return f"token_dim={self.token_dim}, length={self.length}"

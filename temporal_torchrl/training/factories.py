@@ -251,13 +251,14 @@ def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOpera
                   action_dim: int) -> tuple[SACLoss, SoftUpdate, torch.optim.Optimizer]:
     target_entropy = (-action_dim / 2 if cfg.sac.target_entropy is None
                       else float(cfg.sac.target_entropy))
-    # On a CPU the twin critics run faster one after the other than through vmap, which
-    # batches small matrix products badly there (benchmarks/README.md, "SAC update"); a GPU
-    # keeps vmap's batched kernels.
+    # Eager on a CPU the twin critics run faster one after the other than through vmap
+    # (benchmarks/README.md, "SAC update"). A GPU keeps vmap's batched kernels, and so does
+    # torch.compile: TorchRL's loop over the critics edits a global pytree registry at every
+    # call, which makes dynamo recompile the update until it gives up.
+    loop_critics = resolve_device(cfg.train.device).type == "cpu" and not cfg.compile.enabled
     loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2",
                    alpha_init=cfg.sac.alpha_init, target_entropy=target_entropy,
-                   delay_qvalue=True,
-                   deactivate_vmap=resolve_device(cfg.train.device).type == "cpu")
+                   delay_qvalue=True, deactivate_vmap=loop_critics)
     loss.make_value_estimator(gamma=cfg.sac.gamma)
     target_updater = SoftUpdate(loss, tau=cfg.sac.tau)
     # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on CPU;
