@@ -1,55 +1,77 @@
-"""Training throughput: the training step against the compute bound, the whole loop, the replay.
+"""Training throughput: the updates against their compute bound, the whole loop, the replay.
 
 Sections (``--sections``, default all), each row next to its reference measured in the same run:
 
-step    the training step alone, as the recipe runs it: one reward-head update (FuRL's ranking
-        loss and D3's directional loss, stage 2: every loss term active), one SAC batch sampled
-        and relabelled, one SAC update; batch 256, D = 1024. Eager and compiled
-        (``torch.compile``), each against the compute bound: the step's FLOPs (counted by
-        ``torch.profiler`` with ``with_flops=True``: matmuls) divided by this machine's fp32 GEMM
-        throughput (a 2048^3 matmul, measured); the achieved fraction of that bound.
+sac     the SAC update alone (batch 256, (256, 256) networks, fused Adam): the recipe's eager
+        update (the twin critics one after the other, only SAC's keys) against its compute
+        bound, against TorchRL's ``SACLoss`` as its docs build it (vmap over the critics, the
+        whole replay batch) and against a plain-PyTorch twin-critic update; the compiled update
+        (``compile.enabled``) against the eager one.
+heads   the reward-head update alone (FuRL's ranking loss and D3's directional loss, stage 2,
+        batch 256, D = 1024 and 256) against its compute bound and against the same two losses
+        scored one term at a time with one backward per loss (the trainer before the terms
+        were joined).
+step    the training step as the recipe runs it: one reward-head update, one SAC batch sampled
+        and relabelled, one SAC update; stage 2, D = 1024. Eager against the compute bound, and
+        compiled (``torch.compile``) against eager in ``--repeats`` fresh builds (min, median,
+        max), with the compile time of the first.
 loop    the whole recipe (``recipes/sac_temporal.py``'s ``train``), env steps/s in the steady
         state (the 3rd and 4th rounds of ``num_envs`` episodes, timed at the episode ends: the
         1st round has no updates, the 2nd compiles) for the state encoder (D = 1024), the
         shipped encoder at 64 px and a random-weight LIV at 224 px; ``env.num_envs`` 1, 2
-        and 4, eager and compiled; against today's loop (one env, eager) of the same encoder;
-        with CUDA also LIV with 16 envs, everything on the GPU, compiled.
+        and 4, eager and compiled; against the loop of one env, eager, of the same encoder;
+        d_sequence against D3 (state encoder, eager); with ``--baseline-rev REV`` the default
+        loop (shipped encoder, 1 env, eager) against that git revision's, run from a worktree
+        in the same process tree; with CUDA also LIV with 16 envs, everything on the GPU.
 reference  the recipe without a VLM reward against a plain TorchRL SAC loop on the same env
         (TensorDictReplayBuffer, same networks and schedule): the recipe's own overhead.
 replay  sampling 256 transitions with their histories at 500,000 transitions (D = 1024) against
         TorchRL's SliceSampler(slice_len=2) on the same float16 embeddings; a stage-2 finetuning
         batch; the replay memory against storing s_t and s_{t+1} in float32.
 
+Compute bounds: the FLOPs torch's profiler counts (``with_flops``: the matrix products) divided
+by this machine's fp32 GEMM rate (a 2048^3 matmul, measured in the same run).
 ``--threads`` sets torch's threads (default: all cores). ``--quick`` shortens everything.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
+import json
 import os
+import statistics
+import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import torch
+import torch.nn.functional as F
 from _common import machine_description, report, seconds_per_call
 from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
+from torch import nn
 from torch.profiler import ProfilerActivity, profile
 from torchrl.data import LazyTensorStorage, SliceSampler, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
-RECIPES = Path(__file__).resolve().parents[1] / "recipes"
-sys.path.insert(0, str(RECIPES))
+# The tree whose recipe and package are measured: this checkout, or (the --baseline-rev rows)
+# a worktree of another revision, which the benchmark runs itself in with this variable set.
+TREE = Path(os.environ.get("TEMPORAL_TORCHRL_TREE", Path(__file__).resolve().parents[1]))
+RECIPES = TREE / "recipes"
+sys.path[:0] = [str(RECIPES), str(TREE)]
 
 import sac_temporal  # noqa: E402
 
+import temporal_torchrl  # noqa: E402
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows  # noqa: E402
 from temporal_torchrl.envs import make_env  # noqa: E402
+from temporal_torchrl.objectives import ranking_loss  # noqa: E402
 from temporal_torchrl.training import factories  # noqa: E402
 
-SECTIONS = ("step", "loop", "reference", "replay")
+SECTIONS = ("sac", "heads", "step", "loop", "reference", "replay")
 
 
 def recipe_config(output_dir: Path, *overrides: str):
@@ -74,25 +96,33 @@ def synthetic_episode(length: int, dim: int, success_from: int | None = None) ->
 
 
 # --------------------------------------------------------------------------- step
-def training_step(compiled: bool, tmp: Path, mode: str | None = None):
-    """The recipe's step (head update, SAC batch + relabel, SAC update) on a stage-2 buffer."""
-    cfg = recipe_config(tmp / "step", "encoder.name=state", "+encoder.options.dim=1024",
-                        f"compile.enabled={str(compiled).lower()}",
-                        f"compile.mode={mode or 'null'}")
+def stage_two_setup(tmp: Path, dim: int, *overrides: str) -> dict:
+    """The recipe's reward, buffer (10 synthetic 500-step episodes, one successful: stage 2),
+    reward-head trainer and SAC update, built by its factories for the state encoder at D."""
+    cfg = recipe_config(tmp / f"setup_{len(os.listdir(tmp))}", "encoder.name=state",
+                        f"+encoder.options.dim={dim}", *overrides)
     torch.manual_seed(0)
-    encoder = factories.make_encoder(cfg)
-    reward = factories.make_reward(cfg, encoder)
+    reward = factories.make_reward(cfg, factories.make_encoder(cfg))
     env = factories.make_environment(cfg, None, None)
     actor, qvalue = factories.make_sac_agent(cfg, env)
     env.close()
     loss, target_updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
-    update_sac = factories.make_sac_update(cfg, loss, target_updater, optimizer)
     buffer = factories.make_replay_buffer(cfg, 20 * 501, reward)
-    buffer.extend(episode_rows(synthetic_episode(500, 1024, success_from=300)))
+    buffer.extend(episode_rows(synthetic_episode(500, dim, success_from=300)))
     for _ in range(9):
-        buffer.extend(episode_rows(synthetic_episode(500, 1024)))
-    trainer = factories.make_reward_trainer(cfg, reward, torch.randn(1024), buffer)
+        buffer.extend(episode_rows(synthetic_episode(500, dim)))
+    trainer = factories.make_reward_trainer(cfg, reward, torch.randn(dim), buffer)
     assert trainer.stage == 2
+    return {"cfg": cfg, "buffer": buffer, "trainer": trainer, "actor": actor, "qvalue": qvalue,
+            "loss": loss,
+            "update_sac": factories.make_sac_update(cfg, loss, target_updater, optimizer)}
+
+
+def training_step(compiled: bool, tmp: Path, mode: str | None = None):
+    """The recipe's step (head update, SAC batch + relabel, SAC update) on a stage-2 buffer."""
+    setup = stage_two_setup(tmp, 1024, f"compile.enabled={str(compiled).lower()}",
+                            f"compile.mode={mode or 'null'}")
+    trainer, buffer, update_sac = setup["trainer"], setup["buffer"], setup["update_sac"]
 
     def step() -> None:
         trainer.update()
@@ -101,41 +131,253 @@ def training_step(compiled: bool, tmp: Path, mode: str | None = None):
     return step
 
 
+def counted_flops(fn) -> float:
+    """The FLOPs of one call of ``fn`` (after one warm-up call), as torch's profiler counts."""
+    fn()
+    with profile(activities=[ProfilerActivity.CPU], with_flops=True) as profiler:
+        fn()
+    return sum(event.flops for event in profiler.key_averages())
+
+
+def bound_row(measure: str, seconds: float, flops: float, peak: float) -> dict:
+    bound = flops / peak
+    return {"measure": measure, "project": 1000 * seconds, "reference": 1000 * bound,
+            "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {peak / 1e9:.0f} GFLOP/s "
+                            "GEMM", "ratio": bound / seconds}
+
+
 def gemm_flops_per_second(size: int = 2048) -> float:
     a, b = torch.randn(size, size), torch.randn(size, size)
     seconds = seconds_per_call(lambda: a @ b, min_seconds=2.0)
     return 2 * size ** 3 / seconds
 
 
-def step_rows(tmp: Path, quick: bool, mode: str | None) -> list[dict]:
-    minimum = 1.0 if quick else 5.0
-    eager = training_step(False, tmp)
-    eager()
-    with profile(activities=[ProfilerActivity.CPU], with_flops=True) as profiler:
-        eager()
-    flops = sum(event.flops for event in profiler.key_averages())
-    peak = gemm_flops_per_second()
-    bound = flops / peak
-    eager_seconds = seconds_per_call(eager, min_seconds=minimum, warmup_calls=5)
-    compiled = training_step(True, tmp, mode)
+# --------------------------------------------------------------------------- sac
+class PlainSAC(nn.Module):
+    """SAC's update in plain PyTorch, CleanRL's shape: a tanh-Gaussian actor, two critics and
+    their targets as separate MLPs, one Adam each for the critics, the actor and the
+    temperature; the recipe's sizes, learning rate, gamma, tau and target entropy."""
+
+    def __init__(self, cfg, observation_dim: int = 39, action_dim: int = 4) -> None:
+        super().__init__()
+        hidden = list(cfg.sac.hidden_sizes)
+
+        def mlp(inputs: int, outputs: int) -> nn.Sequential:
+            layers, width = [], inputs
+            for size in hidden:
+                layers += [nn.Linear(width, size), nn.ReLU()]
+                width = size
+            return nn.Sequential(*layers, nn.Linear(width, outputs))
+
+        self.actor = mlp(observation_dim, 2 * action_dim)
+        self.critics = nn.ModuleList(mlp(observation_dim + action_dim, 1) for _ in range(2))
+        self.targets = copy.deepcopy(self.critics).requires_grad_(False)
+        self.log_alpha = nn.Parameter(torch.zeros(()))
+        self.gamma, self.tau, self.target_entropy = cfg.sac.gamma, cfg.sac.tau, -action_dim / 2
+        lr = cfg.sac.lr
+        self.optimizers = [torch.optim.Adam(self.critics.parameters(), lr=lr, fused=True),
+                           torch.optim.Adam(self.actor.parameters(), lr=lr, fused=True),
+                           torch.optim.Adam([self.log_alpha], lr=lr, fused=True)]
+
+    def sample(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        loc, scale = self.actor(observation).chunk(2, -1)
+        normal = torch.distributions.Normal(loc, F.softplus(scale) + 1e-4)
+        raw = normal.rsample()
+        log_prob = (normal.log_prob(raw)
+                    - 2 * (torch.log(torch.tensor(2.0)) - raw - F.softplus(-2 * raw))).sum(-1)
+        return torch.tanh(raw), log_prob
+
+    def update(self, batch: TensorDict) -> None:
+        observation, action = batch["observation"], batch["action"]
+        nxt = batch["next"]
+        alpha = self.log_alpha.exp()
+        with torch.no_grad():
+            next_action, next_log_prob = self.sample(nxt["observation"])
+            next_input = torch.cat([nxt["observation"], next_action], -1)
+            next_q = torch.min(*(target(next_input) for target in self.targets)).squeeze(-1)
+            target_q = nxt["reward"].squeeze(-1) + self.gamma * (
+                ~nxt["terminated"].squeeze(-1)) * (next_q - alpha * next_log_prob)
+        q_input = torch.cat([observation, action], -1)
+        q_loss = sum(F.mse_loss(critic(q_input).squeeze(-1), target_q)
+                     for critic in self.critics)
+        new_action, log_prob = self.sample(observation)
+        pi_input = torch.cat([observation, new_action], -1)
+        q_new = torch.min(*(critic(pi_input) for critic in self.critics)).squeeze(-1)
+        actor_loss = (alpha.detach() * log_prob - q_new).mean()
+        alpha_loss = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
+        for optimizer in self.optimizers:
+            optimizer.zero_grad(set_to_none=True)
+        q_loss.backward()
+        self.optimizers[0].step()
+        self.optimizers[0].zero_grad(set_to_none=True)  # the actor loss's critic gradients
+        (actor_loss + alpha_loss).backward()
+        self.optimizers[1].step()
+        self.optimizers[2].step()
+        with torch.no_grad():
+            for target, critic in zip(self.targets, self.critics, strict=True):
+                torch._foreach_lerp_(list(target.parameters()), list(critic.parameters()),
+                                     self.tau)
+
+
+def torchrl_sac_update(setup: dict):
+    """TorchRL's SACLoss as its docs build it: vmap over the critics, the whole batch."""
+    from torchrl.objectives import SACLoss, SoftUpdate
+
+    cfg = setup["cfg"]
+    loss = SACLoss(copy.deepcopy(setup["actor"]), copy.deepcopy(setup["qvalue"]),
+                   num_qvalue_nets=2, loss_function="l2", alpha_init=cfg.sac.alpha_init,
+                   target_entropy=-2.0, delay_qvalue=True)
+    loss.make_value_estimator(gamma=cfg.sac.gamma)
+    target = SoftUpdate(loss, tau=cfg.sac.tau)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=cfg.sac.lr, fused=True)
+
+    def update(batch: TensorDict) -> None:
+        losses = loss(batch)
+        (losses["loss_actor"] + losses["loss_qvalue"] + losses["loss_alpha"]).backward()
+        optimizer.step()
+        optimizer.zero_grad(set_to_none=True)
+        target.step()
+
+    return update
+
+
+def cycling(update, batches: list[TensorDict]):
+    """``update`` on the next of ``batches`` at every call (sampling not timed)."""
+    position = iter(range(10 ** 9))
+    return lambda: update(batches[next(position) % len(batches)])
+
+
+def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict]:
+    minimum = 1.0 if quick else 4.0
+    setup = stage_two_setup(tmp, 256)
+    batches = [setup["buffer"].sample() for _ in range(8)]
+    recipe = cycling(setup["update_sac"], batches)
+    flops = counted_flops(recipe)
+    recipe_seconds = seconds_per_call(recipe, min_seconds=minimum, warmup_calls=5)
+    torchrl_seconds = seconds_per_call(cycling(torchrl_sac_update(setup), batches),
+                                       min_seconds=minimum, warmup_calls=5)
+    plain = PlainSAC(setup["cfg"])
+    plain_seconds = seconds_per_call(cycling(plain.update, batches), min_seconds=minimum,
+                                     warmup_calls=5)
+    compiled = stage_two_setup(tmp, 256, "compile.enabled=true", f"compile.mode={mode or 'null'}")
+    compiled_update = cycling(compiled["update_sac"], batches)
     start = time.perf_counter()
-    for _ in range(3):  # compilation, and the recompile at the first stage-2 graph
-        compiled()
+    for _ in range(3):
+        compiled_update()
     compile_seconds = time.perf_counter() - start
-    compiled_seconds = seconds_per_call(compiled, min_seconds=minimum, warmup_calls=5)
-    print(f"step: {flops / 1e9:.3f} GFLOP, GEMM {peak / 1e9:.1f} GFLOP/s, compile "
-          f"{compile_seconds:.0f} s", flush=True)
-    reference = f"compute bound: {flops / 1e9:.2f} GFLOP / {peak / 1e9:.0f} GFLOP/s GEMM"
+    compiled_seconds = seconds_per_call(compiled_update, min_seconds=minimum, warmup_calls=5)
+    print(f"sac: {flops / 1e9:.3f} GFLOP; compiled in {compile_seconds:.0f} s", flush=True)
     return [
-        {"measure": "training step, eager (ms)", "project": 1000 * eager_seconds,
-         "reference": 1000 * bound, "reference is": reference,
-         "ratio": bound / eager_seconds},
-        {"measure": "training step, compiled (ms)", "project": 1000 * compiled_seconds,
-         "reference": 1000 * bound, "reference is": reference,
-         "ratio": bound / compiled_seconds},
-        {"measure": "training step, compiled vs eager (speed-up)",
-         "project": eager_seconds / compiled_seconds, "reference": 1.0,
-         "reference is": "eager", "ratio": eager_seconds / compiled_seconds},
+        bound_row("SAC update, recipe, eager (ms)", recipe_seconds, flops, peak),
+        {"measure": "SAC update, recipe, eager (ms)", "project": 1000 * recipe_seconds,
+         "reference": 1000 * torchrl_seconds,
+         "reference is": "TorchRL SACLoss as documented (vmap critics, whole batch)",
+         "ratio": torchrl_seconds / recipe_seconds},
+        {"measure": "SAC update, recipe, eager (ms)", "project": 1000 * recipe_seconds,
+         "reference": 1000 * plain_seconds, "reference is": "plain PyTorch (CleanRL's shape)",
+         "ratio": plain_seconds / recipe_seconds},
+        {"measure": f"SAC update, compiled ({mode}; compile {compile_seconds:.0f} s) (ms)",
+         "project": 1000 * compiled_seconds, "reference": 1000 * recipe_seconds,
+         "reference is": "the recipe's eager update", "ratio": recipe_seconds / compiled_seconds},
+    ]
+
+
+# --------------------------------------------------------------------------- heads
+def term_by_term_update(trainer):
+    """The trainer's FuRL and D3 losses (stage 2) scored one term at a time through the
+    reward's own calls, one backward and one Adam step per loss: the trainer before its terms
+    were joined into one batch per head."""
+    reward = trainer.reward
+    positional, directional = trainer.losses
+    goal = directional.goal_image_embedding
+
+    def r_p(states):
+        return reward.positional_reward(states["embedding"], states["initial_embedding"],
+                                        states["previous_embedding"])
+
+    def r_d(end, start, states, position=None):
+        return reward.directional_reward(end, start, states["initial_embedding"],
+                                         position=position)
+
+    def losses(batch: TensorDict) -> tuple[torch.Tensor, torch.Tensor]:
+        negative, positive, pair = batch["negative"], batch["positive"], batch["positive_pair"]
+        loss_p = (ranking_loss(r_p(positive), r_p(negative), positional.delta).mean()
+                  + ranking_loss(r_p(pair["later"]), r_p(pair["earlier"]),
+                                 positional.delta).mean())
+        n_t, n_tk = negative["embedding"], negative["previous_embedding"]
+        p_t, p_tk = positive["embedding"], positive["previous_embedding"]
+        loss_d = (r_d(n_t, n_tk, negative).mean()
+                  - r_d(goal.expand_as(n_t), n_t, negative, n_t).mean()
+                  + r_d(p_tk, p_t, positive, p_t).mean() - r_d(p_t, p_tk, positive).mean())
+        return loss_p, loss_d
+
+    def update() -> None:
+        batch = trainer.replay.sample(trainer.batch_size)
+        for loss, optimizer in zip(losses(batch), trainer.optimizers, strict=True):
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+
+    return update, losses
+
+
+def heads_rows(tmp: Path, quick: bool, peak: float) -> list[dict]:
+    minimum = 1.0 if quick else 4.0
+    rows = []
+    for dim in (1024, 256):
+        setup = stage_two_setup(tmp, dim)
+        trainer = setup["trainer"]
+        reference, losses = term_by_term_update(trainer)
+        batch = trainer.replay.sample(trainer.batch_size)
+        joined = [loss(batch)[loss.loss_key] for loss in trainer.losses]
+        for value, expected in zip(joined, losses(batch), strict=True):  # the same losses
+            torch.testing.assert_close(value, expected, rtol=1e-4, atol=1e-5)
+        flops = counted_flops(trainer.update)
+        seconds = seconds_per_call(trainer.update, min_seconds=minimum, warmup_calls=5)
+        reference_seconds = seconds_per_call(reference, min_seconds=minimum, warmup_calls=5)
+        measure = f"reward-head update, FuRL + D3, stage 2, D={dim}, eager (ms)"
+        rows += [bound_row(measure, seconds, flops, peak),
+                 {"measure": measure, "project": 1000 * seconds,
+                  "reference": 1000 * reference_seconds,
+                  "reference is": "term by term, one backward per loss",
+                  "ratio": reference_seconds / seconds}]
+    return rows
+
+
+# --------------------------------------------------------------------------- step
+def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
+              repeats: int) -> list[dict]:
+    """Eager against the bound; compiled against eager in ``repeats`` fresh builds (dynamo
+    reset before each, so each compiles anew, the first with a cold inductor cache)."""
+    minimum = 1.0 if quick else 4.0
+    flops = counted_flops(training_step(False, tmp))
+    eager_times, compiled_times, compile_times = [], [], []
+    for _ in range(repeats):
+        torch._dynamo.reset()
+        eager = training_step(False, tmp)
+        eager_times.append(seconds_per_call(eager, min_seconds=minimum, warmup_calls=5))
+        compiled = training_step(True, tmp, mode)
+        start = time.perf_counter()
+        for _ in range(3):  # compilation, and the recompile at the first stage-2 graph
+            compiled()
+        compile_times.append(time.perf_counter() - start)
+        compiled_times.append(seconds_per_call(compiled, min_seconds=minimum, warmup_calls=5))
+        print(f"step: eager {1000 * eager_times[-1]:.1f} ms, compiled "
+              f"{1000 * compiled_times[-1]:.1f} ms (compiled in {compile_times[-1]:.0f} s)",
+              flush=True)
+    speedups = sorted(e / c for e, c in zip(eager_times, compiled_times, strict=True))
+    eager_seconds, compiled_seconds = (statistics.median(eager_times),
+                                       statistics.median(compiled_times))
+    return [
+        bound_row(f"training step, eager, median of {repeats} (ms)", eager_seconds, flops, peak),
+        bound_row(f"training step, compiled ({mode}), median of {repeats} (ms)",
+                  compiled_seconds, flops, peak),
+        {"measure": f"training step, compiled vs eager (speed-up, {repeats} builds: min / "
+                    f"median / max {speedups[0]:.2f} / {statistics.median(speedups):.2f} / "
+                    f"{speedups[-1]:.2f}; compile {compile_times[0]:.0f} s cold, "
+                    f"{statistics.median(compile_times[1:] or compile_times):.0f} s warm)",
+         "project": speedups[0], "reference": 1.0, "reference is": "eager (min shown)",
+         "ratio": speedups[0]},
     ]
 
 
@@ -208,6 +450,58 @@ def loop_rows(tmp: Path, quick: bool, skip_liv: bool, mode: str | None) -> list[
                          "reference is": "one env, eager, CPU (today's loop)",
                          "ratio": rate / today})
     return rows
+
+
+#: The default run's loop: the shipped encoder at 64 px, FuRL + D3, stage 1 (relay on), 1 env.
+DEFAULT_LOOP = ("encoder.name=metaworld_small", "env.image_size=64")
+
+
+def default_loop_rows(tmp: Path, quick: bool) -> list[dict]:
+    rate = steady_steps_per_second(list(DEFAULT_LOOP), 1, 20 if quick else 100, tmp)
+    return [{"measure": "whole default loop, shipped encoder 64 px, 1 env, eager (env steps/s)",
+             "project": rate, "reference": float("nan"), "reference is": "-",
+             "ratio": float("nan")}]
+
+
+def baseline_rows(tmp: Path, quick: bool, revision: str, rounds: int = 2) -> list[dict]:
+    """The default loop here and at git ``revision`` (a worktree, measured by this script in a
+    subprocess with ``TEMPORAL_TORCHRL_TREE`` set), alternating, ``rounds`` times each."""
+    worktree = tmp / "baseline"
+    subprocess.run(["git", "-C", str(TREE), "worktree", "add", "--detach", str(worktree),
+                    revision], check=True, capture_output=True)
+    ours, theirs = [], []
+    try:
+        for _ in range(rounds):
+            ours.append(default_loop_rows(tmp, quick)[0]["project"])
+            out = tmp / "baseline.json"
+            subprocess.run([sys.executable, __file__, "--sections", "default", "--json",
+                            str(out), "--threads", str(torch.get_num_threads()),
+                            *(["--quick"] if quick else [])],
+                           env={**os.environ, "TEMPORAL_TORCHRL_TREE": str(worktree)},
+                           check=True)
+            theirs.append(json.loads(out.read_text())["rows"][0]["project"])
+            print(f"default loop: {ours[-1]:.1f} here, {theirs[-1]:.1f} at {revision}",
+                  flush=True)
+    finally:
+        subprocess.run(["git", "-C", str(TREE), "worktree", "remove", "--force", str(worktree)],
+                       check=False, capture_output=True)
+    here, there = statistics.median(ours), statistics.median(theirs)
+    return [{"measure": f"whole default loop, shipped encoder 64 px, 1 env, eager, median of "
+                        f"{rounds} (env steps/s)", "project": here, "reference": there,
+             "reference is": f"the same loop at {revision}", "ratio": here / there}]
+
+
+def sequence_rows(tmp: Path, quick: bool) -> list[dict]:
+    """d_sequence (K = 8) against D3 in the same loop: state encoder D = 1024, 1 env, eager."""
+    length = 20 if quick else 100
+    common = ["encoder.name=state", "+encoder.options.dim=1024"]
+    d3 = steady_steps_per_second([*common, "reward.directional=d3"], 1, length, tmp)
+    sequence = steady_steps_per_second([*common, "reward.directional=d_sequence"], 1, length,
+                                       tmp)
+    return [{"measure": "whole loop, d_sequence K=8, state encoder D=1024, 1 env, eager "
+                        "(env steps/s; ratio: D3's rate over it, the cost per env step)",
+             "project": sequence, "reference": d3, "reference is": "D3, the same loop",
+             "ratio": d3 / sequence}]
 
 
 # --------------------------------------------------------------------------- reference
@@ -307,31 +601,48 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
     parser.add_argument("--quick", action="store_true", help="shorter timings (smoke runs)")
     parser.add_argument("--sections", default=",".join(SECTIONS),
-                        help=f"comma-separated subset of {', '.join(SECTIONS)}")
+                        help=f"comma-separated subset of {', '.join(SECTIONS)}, or default "
+                             "(the default loop alone)")
     parser.add_argument("--threads", type=int, default=os.cpu_count(),
                         help="torch threads (default: all cores)")
     parser.add_argument("--skip-liv", action="store_true", help="no LIV loop rows")
     parser.add_argument("--compile-mode", default="max-autotune",
                         help="torch.compile mode of the compiled rows (default: max-autotune, "
                              "the mode that pays off on a CPU)")
+    parser.add_argument("--repeats", type=int, default=5,
+                        help="fresh eager and compiled builds of the step section (default 5)")
+    parser.add_argument("--baseline-rev", default=None,
+                        help="git revision whose default loop the loop section measures too")
     args = parser.parse_args()
     sections = args.sections.split(",")
-    if unknown := set(sections) - set(SECTIONS):
+    if unknown := set(sections) - {*SECTIONS, "default"}:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {', '.join(SECTIONS)}")
     torch.set_num_threads(args.threads)
-    print(f"machine: {machine_description()}", flush=True)
+    print(f"machine: {machine_description()}; package: "
+          f"{Path(temporal_torchrl.__file__).parent}", flush=True)
     rows = []
+    peak = (gemm_flops_per_second() if {"sac", "heads", "step"} & set(sections)
+            else float("nan"))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        if "sac" in sections:
+            rows += sac_rows(tmp, args.quick, args.compile_mode, peak)
+        if "heads" in sections:
+            rows += heads_rows(tmp, args.quick, peak)
         if "step" in sections:
-            rows += step_rows(tmp, args.quick, args.compile_mode)
+            rows += step_rows(tmp, args.quick, args.compile_mode, peak, args.repeats)
+        if "default" in sections:
+            rows += default_loop_rows(tmp, args.quick)
         if "loop" in sections:
+            if args.baseline_rev:
+                rows += baseline_rows(tmp, args.quick, args.baseline_rev)
+            rows += sequence_rows(tmp, args.quick)
             rows += loop_rows(tmp, args.quick, args.skip_liv, args.compile_mode)
         if "reference" in sections:
             rows += reference_rows(tmp, args.quick)
     if "replay" in sections:
         rows += replay_rows(args.quick)
-    report("Training step, whole loop and replay buffer", rows, args.json)
+    report("Training updates, step, whole loop and replay buffer", rows, args.json)
 
 
 if __name__ == "__main__":
