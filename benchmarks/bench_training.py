@@ -15,14 +15,16 @@ step    the training step as the recipe runs it: one reward-head update, one SAC
         and relabelled, one SAC update; stage 2, D = 1024. Eager against the compute bound, and
         compiled (``torch.compile``) against eager in ``--repeats`` fresh builds (min, median,
         max), with the compile time of the first.
-loop    the whole recipe (``recipes/sac_temporal.py``'s ``train``), env steps/s in the steady
-        state (the 3rd and 4th rounds of ``num_envs`` episodes, timed at the episode ends: the
-        1st round has no updates, the 2nd compiles) for the state encoder (D = 1024), the
-        shipped encoder at 64 px and a random-weight LIV at 224 px; ``env.num_envs`` 1, 2
-        and 4, eager and compiled; against the loop of one env, eager, of the same encoder;
-        d_sequence against D3 (state encoder, eager); with ``--baseline-rev REV`` the default
-        loop (shipped encoder, 1 env, eager) against that git revision's, run from a worktree
-        in the same process tree; with CUDA also LIV with 16 envs, everything on the GPU.
+loop    the whole default loop (the shipped encoder at 64 px, FuRL + D3, stage 1 with relay, 1
+        env, eager), env steps/s in the steady state (the 3rd and 4th episodes, timed at their
+        ends: the 1st has no updates), against its bound (its env side, measured without
+        updates, plus its updates' FLOPs at the GEMM rate) and, with ``--baseline-rev REV``,
+        against that git revision's loop, run from a worktree by this script in a subprocess;
+        d_sequence against D3 in the same loop (state encoder, D = 1024).
+grid    the whole recipe for the state encoder (D = 1024), the shipped encoder and a
+        random-weight LIV at 224 px; ``env.num_envs`` 1, 2 and 4, eager and compiled; against
+        the loop of one env, eager, of the same encoder; with CUDA also LIV with 16 envs,
+        everything on the GPU, compiled.
 reference  the recipe without a VLM reward against a plain TorchRL SAC loop on the same env
         (TensorDictReplayBuffer, same networks and schedule): the recipe's own overhead.
 replay  sampling 256 transitions with their histories at 500,000 transitions (D = 1024) against
@@ -71,7 +73,7 @@ from temporal_torchrl.envs import make_env  # noqa: E402
 from temporal_torchrl.objectives import ranking_loss  # noqa: E402
 from temporal_torchrl.training import factories  # noqa: E402
 
-SECTIONS = ("sac", "heads", "step", "loop", "reference", "replay")
+SECTIONS = ("sac", "heads", "step", "loop", "grid", "reference", "replay")
 
 
 def recipe_config(output_dir: Path, *overrides: str):
@@ -96,9 +98,10 @@ def synthetic_episode(length: int, dim: int, success_from: int | None = None) ->
 
 
 # --------------------------------------------------------------------------- step
-def stage_two_setup(tmp: Path, dim: int, *overrides: str) -> dict:
-    """The recipe's reward, buffer (10 synthetic 500-step episodes, one successful: stage 2),
-    reward-head trainer and SAC update, built by its factories for the state encoder at D."""
+def stage_two_setup(tmp: Path, dim: int, *overrides: str, stage: int = 2) -> dict:
+    """The recipe's reward, buffer (10 synthetic 500-step episodes, the first successful in
+    ``stage`` 2), reward-head trainer and SAC update, built by its factories for the state
+    encoder at D."""
     cfg = recipe_config(tmp / f"setup_{len(os.listdir(tmp))}", "encoder.name=state",
                         f"+encoder.options.dim={dim}", *overrides)
     torch.manual_seed(0)
@@ -108,11 +111,12 @@ def stage_two_setup(tmp: Path, dim: int, *overrides: str) -> dict:
     env.close()
     loss, target_updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
     buffer = factories.make_replay_buffer(cfg, 20 * 501, reward)
-    buffer.extend(episode_rows(synthetic_episode(500, dim, success_from=300)))
+    buffer.extend(episode_rows(synthetic_episode(500, dim,
+                                                 success_from=300 if stage == 2 else None)))
     for _ in range(9):
         buffer.extend(episode_rows(synthetic_episode(500, dim)))
     trainer = factories.make_reward_trainer(cfg, reward, torch.randn(dim), buffer)
-    assert trainer.stage == 2
+    assert trainer.stage == stage
     return {"cfg": cfg, "buffer": buffer, "trainer": trainer, "actor": actor, "qvalue": qvalue,
             "loss": loss,
             "update_sac": factories.make_sac_update(cfg, loss, target_updater, optimizer)}
@@ -463,16 +467,23 @@ def default_loop_rows(tmp: Path, quick: bool) -> list[dict]:
              "ratio": float("nan")}]
 
 
-def baseline_rows(tmp: Path, quick: bool, revision: str, rounds: int = 2) -> list[dict]:
-    """The default loop here and at git ``revision`` (a worktree, measured by this script in a
-    subprocess with ``TEMPORAL_TORCHRL_TREE`` set), alternating, ``rounds`` times each."""
-    worktree = tmp / "baseline"
-    subprocess.run(["git", "-C", str(TREE), "worktree", "add", "--detach", str(worktree),
-                    revision], check=True, capture_output=True)
+def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
+                  rounds: int = 2) -> list[dict]:
+    """The default loop here and (``revision``) at that git revision, from a worktree measured
+    by this script in a subprocess with ``TEMPORAL_TORCHRL_TREE`` set, alternating, ``rounds``
+    times each; and the most that faster updates could give it: its env side (the same loop
+    without updates) plus its updates' FLOPs at the GEMM rate."""
+    length = 20 if quick else 100
     ours, theirs = [], []
+    if revision is not None:
+        worktree = tmp / "baseline"
+        subprocess.run(["git", "-C", str(TREE), "worktree", "add", "--detach", str(worktree),
+                        revision], check=True, capture_output=True)
     try:
         for _ in range(rounds):
             ours.append(default_loop_rows(tmp, quick)[0]["project"])
+            if revision is None:
+                continue
             out = tmp / "baseline.json"
             subprocess.run([sys.executable, __file__, "--sections", "default", "--json",
                             str(out), "--threads", str(torch.get_num_threads()),
@@ -483,12 +494,30 @@ def baseline_rows(tmp: Path, quick: bool, revision: str, rounds: int = 2) -> lis
             print(f"default loop: {ours[-1]:.1f} here, {theirs[-1]:.1f} at {revision}",
                   flush=True)
     finally:
-        subprocess.run(["git", "-C", str(TREE), "worktree", "remove", "--force", str(worktree)],
-                       check=False, capture_output=True)
-    here, there = statistics.median(ours), statistics.median(theirs)
-    return [{"measure": f"whole default loop, shipped encoder 64 px, 1 env, eager, median of "
-                        f"{rounds} (env steps/s)", "project": here, "reference": there,
-             "reference is": f"the same loop at {revision}", "ratio": here / there}]
+        if revision is not None:
+            subprocess.run(["git", "-C", str(TREE), "worktree", "remove", "--force",
+                            str(worktree)], check=False, capture_output=True)
+    here = statistics.median(ours)
+    today, today_is = ((statistics.median(theirs), f"the same loop at {revision}")
+                       if revision is not None else (here, "the loop here"))
+    env_rate = steady_steps_per_second(
+        [*DEFAULT_LOOP, "train.utd_ratio=0", "train.reward_updates_per_step=0"], 1, length, tmp)
+    # Per env step in stage 1 with relay: one head update, one SAC batch, two SAC updates.
+    setup = stage_two_setup(tmp, 256, stage=1)
+    batch = setup["buffer"].sample()
+    flops = (counted_flops(setup["trainer"].update) + counted_flops(setup["buffer"].sample)
+             + 2 * counted_flops(lambda: setup["update_sac"](batch)))
+    bound = 1.0 / (1.0 / env_rate + flops / peak)
+    print(f"default loop: env side {env_rate:.1f} steps/s, updates {flops / 1e9:.2f} GFLOP a "
+          "step", flush=True)
+    rows = [{"measure": f"whole default loop, shipped encoder 64 px, 1 env, eager, median of "
+                        f"{rounds} (env steps/s)", "project": here, "reference": today,
+             "reference is": today_is, "ratio": here / today},
+            {"measure": f"whole default loop, bound: its env side ({env_rate:.1f} steps/s "
+                        f"without updates) + {flops / 1e9:.2f} GFLOP of updates a step at "
+                        f"{peak / 1e9:.0f} GFLOP/s (env steps/s)", "project": bound,
+             "reference": today, "reference is": today_is, "ratio": bound / today}]
+    return rows
 
 
 def sequence_rows(tmp: Path, quick: bool) -> list[dict]:
@@ -621,7 +650,7 @@ def main() -> None:
     print(f"machine: {machine_description()}; package: "
           f"{Path(temporal_torchrl.__file__).parent}", flush=True)
     rows = []
-    peak = (gemm_flops_per_second() if {"sac", "heads", "step"} & set(sections)
+    peak = (gemm_flops_per_second() if {"sac", "heads", "step", "loop"} & set(sections)
             else float("nan"))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -634,9 +663,9 @@ def main() -> None:
         if "default" in sections:
             rows += default_loop_rows(tmp, args.quick)
         if "loop" in sections:
-            if args.baseline_rev:
-                rows += baseline_rows(tmp, args.quick, args.baseline_rev)
+            rows += baseline_rows(tmp, args.quick, args.baseline_rev, peak)
             rows += sequence_rows(tmp, args.quick)
+        if "grid" in sections:
             rows += loop_rows(tmp, args.quick, args.skip_liv, args.compile_mode)
         if "reference" in sections:
             rows += reference_rows(tmp, args.quick)
