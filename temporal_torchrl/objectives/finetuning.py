@@ -62,6 +62,8 @@ class PositionalRankingLoss(LossModule):
 
     Stage 2: ``L = L_pos-neg + L_pos-pos`` (eq. 3.2-3.4), each the mean over the batch of
     ``l_delta(s^p, s^n)`` and ``l_delta(s^p_i, s^p_{i-gap})``. The stage-1 term is dropped.
+    The rewards of all the batch's groups come from one :meth:`positional_reward` call on the
+    groups concatenated: one batch through the heads.
 
     Args:
         reward: the :class:`TemporalReward` whose positional heads are trained (its variant,
@@ -151,6 +153,9 @@ class DirectionalLoss(LossModule):
     (:func:`~temporal_torchrl.rewards.straight_window`: every step along s_g - s_t); opposite,
     W_t reversed (s_t .. s_{t-K+1}: every step negated, in reverse order). With K = 2 these are
     D3's three directions with k = 1.
+
+    The terms are scored in two reward calls (the observed directions of both groups, then the
+    contrasted ones), each one batch through the heads; a window reward's terms one by one.
 
     With ``reward.certainty_scaling`` the loss also refreshes the reward's certainty references
     (:class:`~temporal_torchrl.rewards.CertaintyMemory`) from the batch.

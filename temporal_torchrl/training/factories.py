@@ -252,7 +252,7 @@ def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOpera
     target_entropy = (-action_dim / 2 if cfg.sac.target_entropy is None
                       else float(cfg.sac.target_entropy))
     # Eager on a CPU the twin critics run faster one after the other than through vmap
-    # (benchmarks/README.md, "SAC update"). A GPU keeps vmap's batched kernels, and so does
+    # (docs/guides/throughput.md, "SAC update"). A GPU keeps vmap's batched kernels, and so does
     # torch.compile: TorchRL's loop over the critics edits a global pytree registry at every
     # call, which makes dynamo recompile the update until it gives up.
     loop_critics = resolve_device(cfg.train.device).type == "cpu" and not cfg.compile.enabled

@@ -21,7 +21,8 @@ class RewardHeadTrainer:
     directional loss, or the certainty loss), each with its own Adam optimizer over its heads.
     Every :meth:`update` draws one batch from ``replay`` (an
     :class:`~temporal_torchrl.data.EpisodeReplayBuffer`'s ``finetuning`` view: negatives, and
-    from stage 2 on positives and positive pairs) and takes one step on each loss. The losses
+    from stage 2 on positives and positive pairs) and takes one step on each loss (one backward of
+    their sum: their heads are disjoint). The losses
     call the reward's own :meth:`~temporal_torchrl.rewards.TemporalReward.positional_reward` and
     :meth:`~temporal_torchrl.rewards.TemporalReward.directional_reward`, the calls the env and
     the relabelling make, so the heads are trained on the reward the agent receives.
