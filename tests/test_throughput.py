@@ -82,31 +82,40 @@ def test_several_envs_resume_like_the_uninterrupted_run(tmp_path):
         torch.testing.assert_close(second["sac_loss"][key], value, msg=key)
 
 
-def test_compiled_sac_update_matches_the_eager_one(tmp_path, monkeypatch):
-    """torch.compile (inductor, CPU) of the SAC update: the same parameters after 3 updates on
-    the same batches, within float tolerance (inductor drawing its random numbers as eager does:
-    the update samples actions)."""
-    import torch._inductor.config as inductor_config
+def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path):
+    """compile.enabled on a CPU: the trainer's reward-head losses run through torch.compile
+    (inductor) and give the eager losses' values and gradients on the same stage-2 batch,
+    within float tolerance; the SAC update stays eager there (compiled, it measured no
+    faster)."""
+    from helpers import make_episode
 
-    monkeypatch.setattr(inductor_config, "fallback_random", True)
-    cfg = config(tmp_path, "reward.directional=d3")
+    from temporal_torchrl.data import EpisodeReplayBuffer
+    from temporal_torchrl.data import episode_rows as stored_rows
+
+    buffer = EpisodeReplayBuffer(capacity=200, history=2, gap=5)
+    buffer.extend(stored_rows(make_episode(0, 20), embedding_dtype=torch.float32))
+    buffer.extend(stored_rows(make_episode(1, 20, successes=(12,)),
+                              embedding_dtype=torch.float32))
+    cfg = config(tmp_path, "reward.directional=d3", "compile.enabled=true")
+    reward = make_temporal_reward("drawer-open", load_encoder("state", dim=4),
+                                  positional="furl", directional="d3")
+    trainer = factories.make_reward_trainer(cfg, reward, torch.ones(4), buffer)
+    batch = buffer.finetuning.sample(16)
+    for loss, compiled in zip(trainer.losses, trainer._forwards, strict=True):
+        assert compiled is not loss
+        parameters = list(loss.parameters())
+        values = [forward(batch)[loss.loss_key] for forward in (loss, compiled)]
+        eager_grads, compiled_grads = (torch.autograd.grad(value, parameters, allow_unused=True)
+                                       for value in values)
+        torch.testing.assert_close(values[1], values[0], rtol=1e-5, atol=1e-6)
+        for eager, other in zip(eager_grads, compiled_grads, strict=True):
+            if eager is not None:
+                torch.testing.assert_close(other, eager, rtol=1e-4, atol=1e-6)
     env = factories.make_environment(cfg, None, None)
-    results = []
-    batches = [env.rollout(16, break_when_any_done=False) for _ in range(3)]
-    for compiled in (False, True):
-        cfg.compile.enabled = compiled
-        torch.manual_seed(0)
-        actor, qvalue = factories.make_sac_agent(cfg, env)
-        loss, updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
-        update = factories.make_sac_update(cfg, loss, updater, optimizer)
-        losses = [update(batch.clone())["loss_qvalue"] for batch in batches]
-        results.append(([p.detach().clone() for p in loss.parameters()], losses))
+    actor, qvalue = factories.make_sac_agent(cfg, env)
     env.close()
-    (eager_params, eager_losses), (compiled_params, compiled_losses) = results
-    for eager, compiled in zip(eager_losses, compiled_losses, strict=True):
-        torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
-    for eager, compiled in zip(eager_params, compiled_params, strict=True):
-        torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
+    update = factories.make_sac_update(cfg, *factories.make_sac_loss(cfg, actor, qvalue, 4))
+    assert not hasattr(update, "_torchdynamo_orig_callable")  # not wrapped by torch.compile
 
 
 def test_cpu_sac_update_matches_torchrls_vmap_update(tmp_path):

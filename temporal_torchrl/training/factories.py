@@ -251,14 +251,14 @@ def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOpera
                   action_dim: int) -> tuple[SACLoss, SoftUpdate, torch.optim.Optimizer]:
     target_entropy = (-action_dim / 2 if cfg.sac.target_entropy is None
                       else float(cfg.sac.target_entropy))
-    # Eager on a CPU the twin critics run faster one after the other than through vmap
-    # (docs/guides/throughput.md, "SAC update"). A GPU keeps vmap's batched kernels, and so does
-    # torch.compile: TorchRL's loop over the critics edits a global pytree registry at every
-    # call, which makes dynamo recompile the update until it gives up.
-    loop_critics = resolve_device(cfg.train.device).type == "cpu" and not cfg.compile.enabled
+    # On a CPU the twin critics run one after the other rather than through vmap: a little
+    # faster eager, and the CPU's SAC update is never compiled (make_sac_update). A GPU keeps
+    # vmap's batched kernels, which torch.compile needs: TorchRL's loop over the critics edits
+    # a global pytree registry at every call, so dynamo would recompile it until it gave up.
     loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2",
                    alpha_init=cfg.sac.alpha_init, target_entropy=target_entropy,
-                   delay_qvalue=True, deactivate_vmap=loop_critics)
+                   delay_qvalue=True,
+                   deactivate_vmap=resolve_device(cfg.train.device).type == "cpu")
     loss.make_value_estimator(gamma=cfg.sac.gamma)
     target_updater = SoftUpdate(loss, tau=cfg.sac.tau)
     # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on CPU;
@@ -271,7 +271,9 @@ def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOpera
 def make_sac_update(cfg: DictConfig, loss: SACLoss, target_updater: SoftUpdate,
                     optimizer: torch.optim.Optimizer) -> Callable[[TensorDict], TensorDict]:
     """One SAC step on a batch: losses, backward, Adam, target update; returns the detached
-    losses, alpha and entropy. Compiled (``compile.*``) as in TorchRL's SAC recipe."""
+    losses, alpha and entropy. Compiled (``compile.*``) as in TorchRL's SAC recipe on a GPU;
+    eager on a CPU, where the compiled update measured no faster than this one
+    (docs/guides/throughput.md)."""
     keys = loss.in_keys
 
     def update(batch: TensorDict) -> TensorDict:
@@ -285,7 +287,7 @@ def make_sac_update(cfg: DictConfig, loss: SACLoss, target_updater: SoftUpdate,
         return loss_td.select("loss_actor", "loss_qvalue", "loss_alpha", "alpha",
                               "entropy").detach()
 
-    if cfg.compile.enabled:
+    if cfg.compile.enabled and resolve_device(cfg.train.device).type == "cuda":
         update = torch.compile(update, mode=cfg.compile.mode)
     if cfg.compile.cudagraphs:
         update = CudaGraphModule(update, in_keys=[], out_keys=[], warmup=5)
