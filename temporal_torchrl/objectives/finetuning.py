@@ -115,7 +115,7 @@ class PositionalRankingLoss(LossModule):
         stage = 2 if "positive" in tensordict.keys() else 1
         groups = {name: states for name, states in _state_groups(tensordict).items()
                   if stage == 2 or name == "negative"}
-        rewards = _split_call(self.positional_reward, groups, POSITIONAL_KEYS)
+        rewards = _split_call(self.positional_reward, groups, _POSITIONAL_KEYS)
         if stage == 1 and "negative" in rewards:
             distance = (groups["negative"]["embedding"]
                         - self.goal_image_embedding).norm(dim=-1)
@@ -422,7 +422,7 @@ def _references(groups: dict[str, TensorDictBase]) -> tuple[Tensor, Tensor, Tens
 
 
 #: The state keys a positional reward reads.
-POSITIONAL_KEYS = ("embedding", "initial_embedding", "previous_embedding")
+_POSITIONAL_KEYS = ("embedding", "initial_embedding", "previous_embedding")
 
 
 def _state_groups(tensordict: TensorDictBase) -> dict[str, TensorDictBase]:
