@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import itertools
 import json
 import os
 import statistics
@@ -74,6 +75,7 @@ from temporal_torchrl.objectives import ranking_loss  # noqa: E402
 from temporal_torchrl.training import factories  # noqa: E402
 
 SECTIONS = ("sac", "heads", "step", "loop", "grid", "reference", "replay")
+RUN_IDS = itertools.count()  # a fresh output_dir per recipe run
 
 
 def recipe_config(output_dir: Path, *overrides: str):
@@ -102,7 +104,7 @@ def stage_two_setup(tmp: Path, dim: int, *overrides: str, stage: int = 2) -> dic
     """The recipe's reward, buffer (10 synthetic 500-step episodes, the first successful in
     ``stage`` 2), reward-head trainer and SAC update, built by its factories for the state
     encoder at D."""
-    cfg = recipe_config(tmp / f"setup_{len(os.listdir(tmp))}", "encoder.name=state",
+    cfg = recipe_config(tmp / f"setup_{next(RUN_IDS)}", "encoder.name=state",
                         f"+encoder.options.dim={dim}", *overrides)
     torch.manual_seed(0)
     reward = factories.make_reward(cfg, factories.make_encoder(cfg))
@@ -407,7 +409,7 @@ def steady_steps_per_second(cfg_overrides: list[str], num_envs: int, length: int
             clock[step] = time.perf_counter()
         log_metrics(logger, metrics, step)
 
-    cfg = recipe_config(tmp / f"loop_{len(os.listdir(tmp))}", *cfg_overrides,
+    cfg = recipe_config(tmp / f"loop_{next(RUN_IDS)}", *cfg_overrides,
                         f"env.num_envs={num_envs}", f"env.max_episode_steps={length}",
                         "train.episodes=" + str(4 * num_envs))
     sac_temporal.log_metrics = timed
@@ -469,12 +471,22 @@ def default_loop_rows(tmp: Path, quick: bool) -> list[dict]:
              "ratio": float("nan")}]
 
 
+def fresh_default_loop(tmp: Path, quick: bool, tree: Path) -> float:
+    """The default loop's rate, measured by this script in a fresh process on ``tree``'s recipe
+    and package (``TEMPORAL_TORCHRL_TREE``)."""
+    out = tmp / f"default_{next(RUN_IDS)}.json"
+    subprocess.run([sys.executable, __file__, "--sections", "default", "--json", str(out),
+                    "--threads", str(torch.get_num_threads()), *(["--quick"] if quick else [])],
+                   env={**os.environ, "TEMPORAL_TORCHRL_TREE": str(tree)}, check=True)
+    return json.loads(out.read_text())["rows"][0]["project"]
+
+
 def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
                   rounds: int = 2) -> list[dict]:
-    """The default loop here and (``revision``) at that git revision, from a worktree measured
-    by this script in a subprocess with ``TEMPORAL_TORCHRL_TREE`` set, alternating, ``rounds``
-    times each; and the most that faster updates could give it: its env side (the same loop
-    without updates) plus its updates' FLOPs at the GEMM rate."""
+    """The default loop here and (``revision``) at that git revision, each in a fresh process
+    (the revision's from a worktree), alternating, ``rounds`` times each; and the most that
+    faster updates could give it: its env side (the same loop without updates) plus its
+    updates' FLOPs at the GEMM rate."""
     length = 20 if quick else 100
     ours, theirs = [], []
     if revision is not None:
@@ -483,16 +495,10 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
                         revision], check=True, capture_output=True)
     try:
         for _ in range(rounds):
-            ours.append(default_loop_rows(tmp, quick)[0]["project"])
+            ours.append(fresh_default_loop(tmp, quick, TREE))
             if revision is None:
                 continue
-            out = tmp / "baseline.json"
-            subprocess.run([sys.executable, __file__, "--sections", "default", "--json",
-                            str(out), "--threads", str(torch.get_num_threads()),
-                            *(["--quick"] if quick else [])],
-                           env={**os.environ, "TEMPORAL_TORCHRL_TREE": str(worktree)},
-                           check=True)
-            theirs.append(json.loads(out.read_text())["rows"][0]["project"])
+            theirs.append(fresh_default_loop(tmp, quick, worktree))
             print(f"default loop: {ours[-1]:.1f} here, {theirs[-1]:.1f} at {revision}",
                   flush=True)
     finally:
