@@ -52,7 +52,6 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
-from _common import machine_description, report, seconds_per_call
 from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 from torch import nn
@@ -62,11 +61,13 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 # The tree whose recipe and package are measured: this checkout, or (the --baseline-rev rows)
 # a worktree of another revision, which the benchmark runs itself in with this variable set.
+# Before the first import of the package (_common imports it too).
 TREE = Path(os.environ.get("TEMPORAL_TORCHRL_TREE", Path(__file__).resolve().parents[1]))
 RECIPES = TREE / "recipes"
 sys.path[:0] = [str(RECIPES), str(TREE)]
 
 import sac_temporal  # noqa: E402
+from _common import machine_description, report, seconds_per_call  # noqa: E402
 
 import temporal_torchrl  # noqa: E402
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows  # noqa: E402
@@ -482,7 +483,7 @@ def fresh_default_loop(tmp: Path, quick: bool, tree: Path) -> float:
 
 
 def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
-                  rounds: int = 2) -> list[dict]:
+                  rounds: int = 3) -> list[dict]:
     """The default loop here and (``revision``) at that git revision, each in a fresh process
     (the revision's from a worktree), alternating, ``rounds`` times each; and the most that
     faster updates could give it: its env side (the same loop without updates) plus its
