@@ -101,7 +101,7 @@ def synthetic_episode(length: int, dim: int, success_from: int | None = None) ->
 
 
 # --------------------------------------------------------------------------- step
-def stage_two_setup(tmp: Path, dim: int, *overrides: str, stage: int = 2) -> dict:
+def training_setup(tmp: Path, dim: int, *overrides: str, stage: int = 2) -> dict:
     """The recipe's reward, buffer (10 synthetic 500-step episodes, the first successful in
     ``stage`` 2), reward-head trainer and SAC update, built by its factories for the state
     encoder at D."""
@@ -127,7 +127,7 @@ def stage_two_setup(tmp: Path, dim: int, *overrides: str, stage: int = 2) -> dic
 
 def training_step(compiled: bool, tmp: Path, mode: str | None = None):
     """The recipe's step (head update, SAC batch + relabel, SAC update) on a stage-2 buffer."""
-    setup = stage_two_setup(tmp, 1024, f"compile.enabled={str(compiled).lower()}",
+    setup = training_setup(tmp, 1024, f"compile.enabled={str(compiled).lower()}",
                             f"compile.mode={mode or 'null'}")
     trainer, buffer, update_sac = setup["trainer"], setup["buffer"], setup["update_sac"]
 
@@ -250,13 +250,13 @@ def torchrl_sac_update(setup: dict):
 
 def cycling(update, batches: list[TensorDict]):
     """``update`` on the next of ``batches`` at every call (sampling not timed)."""
-    position = iter(range(10 ** 9))
-    return lambda: update(batches[next(position) % len(batches)])
+    calls = itertools.count()
+    return lambda: update(batches[next(calls) % len(batches)])
 
 
 def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict]:
     minimum = 1.0 if quick else 4.0
-    setup = stage_two_setup(tmp, 256)
+    setup = training_setup(tmp, 256)
     batches = [setup["buffer"].sample() for _ in range(8)]
     recipe = cycling(setup["update_sac"], batches)
     flops = counted_flops(recipe)
@@ -334,7 +334,7 @@ def heads_rows(tmp: Path, quick: bool, peak: float) -> list[dict]:
     minimum = 1.0 if quick else 4.0
     rows = []
     for dim in (1024, 256):
-        setup = stage_two_setup(tmp, dim)
+        setup = training_setup(tmp, dim)
         trainer = setup["trainer"]
         reference, losses = term_by_term_update(trainer)
         batch = trainer.replay.sample(trainer.batch_size)
@@ -494,8 +494,12 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     ours, theirs = [], []
     if revision is not None:
         worktree = tmp / "baseline"
-        subprocess.run(["git", "-C", str(TREE), "worktree", "add", "--detach", str(worktree),
-                        revision], check=True, capture_output=True)
+        added = subprocess.run(["git", "-C", str(TREE), "worktree", "add", "--detach",
+                                str(worktree), revision], capture_output=True, text=True)
+        if added.returncode != 0:
+            raise SystemExit(f"--baseline-rev {revision!r}: git could not check it out "
+                             f"({added.stderr.strip()}); pass a commit, tag or branch of "
+                             f"{TREE}, e.g. --baseline-rev HEAD~1.")
     try:
         for _ in range(rounds):
             ours.append(fresh_default_loop(tmp, quick, TREE))
@@ -514,7 +518,7 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     env_rate = steady_steps_per_second(
         [*DEFAULT_LOOP, "train.utd_ratio=0", "train.reward_updates_per_step=0"], 1, length, tmp)
     # Per env step in stage 1 with relay: one head update, one SAC batch, two SAC updates.
-    setup = stage_two_setup(tmp, 256, stage=1)
+    setup = training_setup(tmp, 256, stage=1)
     batch = setup["buffer"].sample()
     flops = (counted_flops(setup["trainer"].update) + counted_flops(setup["buffer"].sample)
              + 2 * counted_flops(lambda: setup["update_sac"](batch)))
@@ -654,6 +658,9 @@ def main() -> None:
     parser.add_argument("--baseline-rev", default=None,
                         help="git revision whose default loop the loop section measures too")
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats {args.repeats}: expected an integer >= 1 (fresh builds of "
+                     "the step section).")
     sections = args.sections.split(",")
     if unknown := set(sections) - {*SECTIONS, "default"}:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {', '.join(SECTIONS)}")

@@ -442,6 +442,9 @@ def _split_call(function: Callable[[TensorDictBase], Tensor],
     through the heads instead of one per group (the heads treat each state on its own)."""
     if not groups:
         return {}
+    if len(groups) == 1:  # stage 1: the negatives alone, nothing to join
+        (name, states), = groups.items()
+        return {name: function(states)}
     joined = torch.cat([states.select(*keys) for states in groups.values()])
     values = function(joined).split([states.shape[0] for states in groups.values()])
     return dict(zip(groups, values, strict=True))

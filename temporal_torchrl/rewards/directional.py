@@ -122,13 +122,19 @@ def window_tokens(window: Tensor, position: Tensor | None = None) -> Tensor:
     each step of the window as D3's image input, read at one position. Zero steps (the padding
     with s_0 at an episode start) stay zero after :func:`unit`.
     """
+    position_part, steps = _window_parts(window, position)
+    position_part, steps = torch.broadcast_tensors(position_part.unsqueeze(-2), steps)
+    return torch.cat((position_part, steps), dim=-1)
+
+
+def _window_parts(window: Tensor, position: Tensor | None) -> tuple[Tensor, Tensor]:
+    """The two parts of :func:`window_tokens`: n(p) ``[..., D]`` (p defaults to the window's
+    newest entry) and the steps n(w_j - w_{j-1}) ``[..., K - 1, D]``."""
     if window.ndim < 2 or window.shape[-2] < 2:
         raise ValueError(f"window of shape {tuple(window.shape)}; expected [..., K, D] with "
                          "K >= 2 embeddings (K - 1 steps).")
     position = window[..., -1, :] if position is None else position
-    steps = unit(window[..., 1:, :] - window[..., :-1, :])
-    position_part, steps = torch.broadcast_tensors(unit(position).unsqueeze(-2), steps)
-    return torch.cat((position_part, steps), dim=-1)
+    return unit(position), unit(window[..., 1:, :] - window[..., :-1, :])
 
 
 def straight_window(start: Tensor, end: Tensor, length: int) -> Tensor:
@@ -162,11 +168,9 @@ def d_sequence(heads: RewardHeads, s: Tensor, *, window: Tensor | None = None, g
     ``s`` and ``s_prev`` are not read: the window carries the direction.
     """
     window = _required(window, "window", "d_sequence")
-    position = window[..., -1, :] if position is None else position
-    steps = unit(window[..., 1:, :] - window[..., :-1, :])
     # heads.image(window_tokens(window, position)), with n(s_t) embedded once per window
-    return cosine_similarity(heads.image.forward_with_context(unit(position), steps),
-                             heads.text(g - b))
+    image = heads.image.forward_with_context(*_window_parts(window, position))
+    return cosine_similarity(image, heads.text(g - b))
 
 
 # The built-in directional rewards, into DIRECTIONAL; d3-d5 read position ⊕ direction (2·D),
