@@ -101,10 +101,10 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
                              if checkpoint is None else ([], checkpoint["goal_image"]))
 
     # ---- SAC, replay buffer, reward-head trainer
-    actor, qvalue = factories.make_sac_agent(cfg, env)
-    sac_loss, target_updater, sac_optimizer = factories.make_sac_loss(
-        cfg, actor, qvalue, env.action_spec.shape[-1])
-    update_sac = factories.make_sac_update(cfg, sac_loss, target_updater, sac_optimizer)
+    actor, critics = factories.make_sac_agent(cfg, env)
+    sac_loss, sac_optimizer = factories.make_sac_loss(cfg, actor, critics,
+                                                      env.action_spec.shape[-1])
+    update_sac = factories.make_sac_update(cfg, sac_loss, sac_optimizer)
     expert_rows = (checkpoint["expert_rows"] if checkpoint is not None
                    else sum(len(rows) for rows in preloaded))
     buffer = factories.make_replay_buffer(cfg, factories.replay_capacity(

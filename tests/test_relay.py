@@ -12,6 +12,7 @@ from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torchrl.data import Bounded
 
+from temporal_torchrl.objectives import StackedCriticSACLoss
 from temporal_torchrl.runs import RunDirectory
 from temporal_torchrl.training.relay import RELAY_PERIODS, RelayPolicy, RelaySchedule
 
@@ -92,12 +93,10 @@ def test_stage_one_run_relays_every_other_episode(tmp_path, monkeypatch):
     """20-step episodes, periods longer than an episode: by the release's rule episode 2 of 3
     (0-based 1) runs on the relay agent from its first step, the others on the VLM agent; the
     relay agent learns from the VLM agent's batches with their sparse task reward."""
-    from torchrl.objectives import SACLoss
-
     from temporal_torchrl.data import EpisodeReplayBuffer
 
     batches: dict[int, list] = {}
-    forward = SACLoss.forward
+    forward = StackedCriticSACLoss.forward
 
     def recording_forward(self, tensordict):
         batches.setdefault(id(self), []).append(tensordict.select(
@@ -112,7 +111,7 @@ def test_stage_one_run_relays_every_other_episode(tmp_path, monkeypatch):
         sampled.append(batch["next", "success"].clone())
         return batch
 
-    monkeypatch.setattr(SACLoss, "forward", recording_forward)
+    monkeypatch.setattr(StackedCriticSACLoss, "forward", recording_forward)
     monkeypatch.setattr(EpisodeReplayBuffer, "sample", recording_sample)
     summary = sac_temporal.train(config(tmp_path, "logger.backend=csv", "logger.log_every=5"))
     vlm, relay = batches.values()  # the VLM agent's loss is built (and called) first

@@ -8,7 +8,7 @@ from helpers import config
 from tensordict import TensorDict
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows, transition_index
-from temporal_torchrl.objectives import PositionalRankingLoss
+from temporal_torchrl.objectives import PositionalRankingLoss, StackedCriticSACLoss
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, register_reward, unregister_reward
 from temporal_torchrl.training import factories
 
@@ -60,8 +60,6 @@ def test_rendered_rollout_relabelled_from_the_buffer_gives_the_env_rewards(tmp_p
 def test_sac_loss_receives_the_relabelled_rewards(tmp_path, monkeypatch):
     """Capture SAC's batches during a run: their rewards are those of the heads at that update,
     not the sparse task reward and not the values logged during collection."""
-    from torchrl.objectives import SACLoss
-
     made = []
     make_reward = factories.make_reward
     monkeypatch.setattr(factories, "make_reward",
@@ -77,15 +75,15 @@ def test_sac_loss_receives_the_relabelled_rewards(tmp_path, monkeypatch):
                              batch["next", "success"].float().squeeze(-1) - 1.0))
         return batch
 
-    forward = SACLoss.forward
+    forward = StackedCriticSACLoss.forward
 
     def recording_forward(self, tensordict):
         received.append(tensordict["next", "reward"].squeeze(-1).clone())
         return forward(self, tensordict)
 
     monkeypatch.setattr(EpisodeReplayBuffer, "sample", recording_sample)
-    monkeypatch.setattr(SACLoss, "forward", recording_forward)
-    # No relay: its agent's SACLoss learns from the sparse reward (tests/test_relay.py)
+    monkeypatch.setattr(StackedCriticSACLoss, "forward", recording_forward)
+    # No relay: its agent's SAC loss learns from the sparse reward (tests/test_relay.py)
     sac_temporal.train(config(tmp_path, "reward.directional=d3", "reward.rho=1.0",
                               "reward.lambda_=4.0", "train.episodes=2", "train.relay=false"))
     assert len(received) == len(expected) == 20  # one update per step after the 1st episode

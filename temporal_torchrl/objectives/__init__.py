@@ -1,4 +1,5 @@
-"""Loss modules: the reward-finetuning losses of the positional and directional heads."""
+"""Loss modules: SAC with stacked critics, and the reward-finetuning losses of the positional and
+directional heads."""
 
 from temporal_torchrl.objectives.finetuning import (
     HEADS_LEARNING_RATE,
@@ -9,12 +10,15 @@ from temporal_torchrl.objectives.finetuning import (
     ranking_loss,
     remember_certainty_references,
 )
+from temporal_torchrl.objectives.sac import StackedCriticSACLoss, StackedQValueNetwork
 
 __all__ = [
     "HEADS_LEARNING_RATE",
     "CertaintyLoss",
     "DirectionalLoss",
     "PositionalRankingLoss",
+    "StackedCriticSACLoss",
+    "StackedQValueNetwork",
     "finetuning_losses",
     "ranking_loss",
     "remember_certainty_references",

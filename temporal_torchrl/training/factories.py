@@ -19,8 +19,7 @@ from torch import nn
 from torchrl.collectors import Collector
 from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType
-from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
-from torchrl.objectives import SACLoss, SoftUpdate
+from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from torchrl.record.loggers import CSVLogger, Logger, WandbLogger
 
 from temporal_torchrl.configs.rules import resolve_device
@@ -38,6 +37,7 @@ from temporal_torchrl.envs import (
     make_temporal_env,
     make_temporal_reward,
 )
+from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.runs import RunDirectory, check_positives_source, reward_options
 from temporal_torchrl.training.logger import RunLogger
@@ -166,17 +166,16 @@ def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor,
     schedule = RelaySchedule(cfg.env.num_envs, list(cfg.train.relay_periods),
                              cfg.train.relay_threshold, seed=cfg.env.seed,
                              active=positive_states < cfg.train.relay_threshold)
-    # SACLoss draws the second critic's initial weights too.
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(cfg.env.seed + RELAY_SEED_OFFSET)
-        relay_actor, relay_qvalue = make_sac_agent(cfg, env)
-        loss, target_updater, optimizer = make_sac_loss(cfg, relay_actor, relay_qvalue,
-                                                        env.action_spec.shape[-1])
+        relay_actor, relay_critics = make_sac_agent(cfg, env)
+        loss, optimizer = make_sac_loss(cfg, relay_actor, relay_critics,
+                                        env.action_spec.shape[-1])
     device = resolve_device(cfg.train.device)
     policy = RelayPolicy(actor, relay_actor, schedule, env.action_spec_unbatched.to(device),
                          noise=cfg.train.relay_noise)
     return RelayExploration(policy, loss, optimizer,
-                            make_sac_update(cfg, loss, target_updater, optimizer))
+                            make_sac_update(cfg, loss, optimizer))
 
 
 def replay_capacity(cfg: DictConfig, expert_rows: int = 0, saved: int | None = None) -> int:
@@ -221,9 +220,10 @@ def make_reward_trainer(cfg: DictConfig, reward: TemporalReward, goal_image: tor
                              compile=cfg.compile.enabled, compile_mode=cfg.compile.mode)
 
 
-def make_sac_agent(cfg: DictConfig, env: EnvBase) -> tuple[ProbabilisticActor, ValueOperator]:
-    """Tanh-Gaussian actor and a Q-network on ``train.device``, MLPs on the state (the prior
-    work's SAC)."""
+def make_sac_agent(cfg: DictConfig,
+                   env: EnvBase) -> tuple[ProbabilisticActor, StackedQValueNetwork]:
+    """Tanh-Gaussian actor and twin Q-networks (stacked) on ``train.device``, MLPs on the state
+    (the prior work's SAC)."""
     device = resolve_device(cfg.train.device)
     action_spec = env.action_spec_unbatched.to(device)
     action_dim = action_spec.shape[-1]
@@ -237,55 +237,45 @@ def make_sac_agent(cfg: DictConfig, env: EnvBase) -> tuple[ProbabilisticActor, V
         distribution_kwargs={"low": action_spec.space.low, "high": action_spec.space.high,
                              "tanh_loc": False},
         return_log_prob=False)
-    qvalue = ValueOperator(
-        MLP(num_cells=list(cfg.sac.hidden_sizes), out_features=1, activation_class=nn.ReLU),
-        in_keys=["action", "observation"])
     with torch.no_grad():  # materialise the lazy layers
         probe = env.fake_tensordict().to(device)
         actor(probe)
-        qvalue(probe)
-    return actor.to(device), qvalue.to(device)
+    critics = StackedQValueNetwork(2, probe["observation"].shape[-1] + action_dim,
+                                   list(cfg.sac.hidden_sizes))
+    return actor.to(device), critics.to(device)
 
 
-def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, qvalue: ValueOperator,
-                  action_dim: int) -> tuple[SACLoss, SoftUpdate, torch.optim.Optimizer]:
+def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, critics: StackedQValueNetwork,
+                  action_dim: int) -> tuple[StackedCriticSACLoss, torch.optim.Optimizer]:
+    """SAC's losses (``StackedCriticSACLoss``: TorchRL's ``SACLoss`` with the critics stacked
+    rather than vmapped) and one fused Adam over the actor, the critics and the temperature."""
     target_entropy = (-action_dim / 2 if cfg.sac.target_entropy is None
                       else float(cfg.sac.target_entropy))
-    # On a CPU the twin critics run one after the other rather than through vmap: a little
-    # faster eager, and the CPU's SAC update is never compiled (make_sac_update). A GPU keeps
-    # vmap's batched kernels, which torch.compile needs: TorchRL's loop over the critics edits
-    # a global pytree registry at every call, so dynamo would recompile it until it gave up.
-    loss = SACLoss(actor, qvalue, num_qvalue_nets=2, loss_function="l2",
-                   alpha_init=cfg.sac.alpha_init, target_entropy=target_entropy,
-                   delay_qvalue=True,
-                   deactivate_vmap=resolve_device(cfg.train.device).type == "cpu")
-    loss.make_value_estimator(gamma=cfg.sac.gamma)
-    target_updater = SoftUpdate(loss, tau=cfg.sac.tau)
+    loss = StackedCriticSACLoss(actor, critics, gamma=cfg.sac.gamma, tau=cfg.sac.tau,
+                                alpha_init=cfg.sac.alpha_init, target_entropy=target_entropy)
     # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on CPU;
     # captured in a CUDA graph, its state must live on the GPU (capturable).
     optimizer = torch.optim.Adam(loss.parameters(), lr=cfg.sac.lr, fused=True,
                                  capturable=cfg.compile.cudagraphs)
-    return loss, target_updater, optimizer
+    return loss, optimizer
 
 
-def make_sac_update(cfg: DictConfig, loss: SACLoss, target_updater: SoftUpdate,
+def make_sac_update(cfg: DictConfig, loss: StackedCriticSACLoss,
                     optimizer: torch.optim.Optimizer) -> Callable[[TensorDict], TensorDict]:
-    """One SAC step on a batch: losses, backward, Adam, target update; returns the detached
-    losses, alpha and entropy. Compiled (``compile.*``) as in TorchRL's SAC recipe on a GPU;
-    eager on a CPU, where the compiled update measured no faster than this one
-    (docs/guides/throughput.md)."""
+    """One SAC step on a batch: losses, backward, Adam, target critics' Polyak step; returns the
+    detached losses, alpha and entropy. Compiled (``compile.*``) as in TorchRL's SAC recipe on
+    a GPU; eager on a CPU, where compiling it measured no faster (docs/guides/throughput.md)."""
     keys = loss.in_keys
 
     def update(batch: TensorDict) -> TensorDict:
-        # Only SAC's keys: the loss copies its input on the way, and a replay batch also
-        # carries the step, the episode and the relabelled reward's parts.
+        # Only SAC's keys: a replay batch also carries the step, the episode and the relabelled
+        # reward's parts.
         loss_td = loss(batch.select(*keys))
         (loss_td["loss_actor"] + loss_td["loss_qvalue"] + loss_td["loss_alpha"]).backward()
         optimizer.step()
         optimizer.zero_grad(set_to_none=True)
-        target_updater.step()
-        return loss_td.select("loss_actor", "loss_qvalue", "loss_alpha", "alpha",
-                              "entropy").detach()
+        loss.update_target_critics()
+        return loss_td.detach()
 
     if cfg.compile.enabled and resolve_device(cfg.train.device).type == "cuda":
         update = torch.compile(update, mode=cfg.compile.mode)

@@ -59,8 +59,8 @@ class TrainingState:
 
     Args:
         progress: the counters.
-        sac_loss, sac_optimizer: TorchRL's ``SACLoss`` (it holds the actor and the critics) and
-            its optimizer.
+        sac_loss, sac_optimizer: the ``StackedCriticSACLoss`` (it holds the actor, the critics
+            and their targets) and its optimizer.
         reward, trainer, relay: the VLM reward, the reward-head trainer and the relay
             exploration, each None when the run has none.
         goal_image: s_g (None without finetuned heads).
