@@ -3,10 +3,10 @@
 Sections (``--sections``, default all), each row next to its reference measured in the same run:
 
 sac     the SAC update alone (batch 256, (256, 256) networks, fused Adam): the recipe's eager
-        update (the twin critics one after the other, only SAC's keys) against its compute
-        bound, against TorchRL's ``SACLoss`` as its docs build it (vmap over the critics, the
-        whole replay batch) and against a plain-PyTorch twin-critic update; TorchRL's loss
-        compiled (``torch.compile``, vmap: the recipe compiles SAC on a GPU only) against it.
+        update (``StackedCriticSACLoss``, only SAC's keys) against its compute bound, against
+        TorchRL's ``SACLoss`` as its docs build it (vmap over the critics, the whole replay
+        batch) and against a plain-PyTorch twin-critic update; the recipe's update compiled
+        (``torch.compile``: the recipe compiles it on a GPU only) against it eager.
 heads   the reward-head update alone (FuRL's ranking loss and D3's directional loss, stage 2,
         batch 256, D = 1024 and 256) against its compute bound and against the same two losses
         scored one term at a time with one backward per loss (the trainer before the terms
@@ -58,6 +58,7 @@ from torch import nn
 from torch.profiler import ProfilerActivity, profile
 from torchrl.data import LazyTensorStorage, SliceSampler, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
+from torchrl.modules import MLP, ValueOperator
 
 # The tree whose recipe and package are measured: this checkout, or (the --baseline-rev rows)
 # a worktree of another revision, which the benchmark runs itself in with this variable set.
@@ -77,6 +78,7 @@ from temporal_torchrl.training import factories  # noqa: E402
 
 SECTIONS = ("sac", "heads", "step", "loop", "grid", "reference", "replay")
 RUN_IDS = itertools.count()  # a fresh output_dir per recipe run
+OBSERVATION_DIM, ACTION_DIM = 39, 4  # Metaworld's state and action
 
 
 def recipe_config(output_dir: Path, *overrides: str):
@@ -110,9 +112,9 @@ def training_setup(tmp: Path, dim: int, *overrides: str, stage: int = 2) -> dict
     torch.manual_seed(0)
     reward = factories.make_reward(cfg, factories.make_encoder(cfg))
     env = factories.make_environment(cfg, None, None)
-    actor, qvalue = factories.make_sac_agent(cfg, env)
+    actor, critics = factories.make_sac_agent(cfg, env)
     env.close()
-    loss, target_updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
+    loss, optimizer = factories.make_sac_loss(cfg, actor, critics, 4)
     buffer = factories.make_replay_buffer(cfg, 20 * 501, reward)
     buffer.extend(episode_rows(synthetic_episode(500, dim,
                                                  success_from=300 if stage == 2 else None)))
@@ -120,9 +122,8 @@ def training_setup(tmp: Path, dim: int, *overrides: str, stage: int = 2) -> dict
         buffer.extend(episode_rows(synthetic_episode(500, dim)))
     trainer = factories.make_reward_trainer(cfg, reward, torch.randn(dim), buffer)
     assert trainer.stage == stage
-    return {"cfg": cfg, "buffer": buffer, "trainer": trainer, "actor": actor, "qvalue": qvalue,
-            "loss": loss,
-            "update_sac": factories.make_sac_update(cfg, loss, target_updater, optimizer)}
+    return {"cfg": cfg, "buffer": buffer, "trainer": trainer, "actor": actor, "loss": loss,
+            "update_sac": factories.make_sac_update(cfg, loss, optimizer)}
 
 
 def training_step(compiled: bool, tmp: Path, mode: str | None = None):
@@ -165,7 +166,8 @@ class PlainSAC(nn.Module):
     their targets as separate MLPs, one Adam each for the critics, the actor and the
     temperature; the recipe's sizes, learning rate, gamma, tau and target entropy."""
 
-    def __init__(self, cfg, observation_dim: int = 39, action_dim: int = 4) -> None:
+    def __init__(self, cfg, observation_dim: int = OBSERVATION_DIM,
+                 action_dim: int = ACTION_DIM) -> None:
         super().__init__()
         hidden = list(cfg.sac.hidden_sizes)
 
@@ -226,14 +228,17 @@ class PlainSAC(nn.Module):
                                      self.tau)
 
 
-def torchrl_sac_update(setup: dict):
-    """TorchRL's SACLoss as its docs build it: vmap over the critics, the whole batch."""
+def torchrl_sac_update(cfg, actor: nn.Module):
+    """TorchRL's SACLoss as its docs build it, for a copy of ``actor``: a ValueOperator MLP
+    critic vmapped over two copies, the whole batch, a TD(0) estimator, SoftUpdate, fused Adam."""
     from torchrl.objectives import SACLoss, SoftUpdate
 
-    cfg = setup["cfg"]
-    loss = SACLoss(copy.deepcopy(setup["actor"]), copy.deepcopy(setup["qvalue"]),
-                   num_qvalue_nets=2, loss_function="l2", alpha_init=cfg.sac.alpha_init,
-                   target_entropy=-2.0, delay_qvalue=True)
+    qvalue = ValueOperator(MLP(in_features=OBSERVATION_DIM + ACTION_DIM,
+                               num_cells=list(cfg.sac.hidden_sizes), out_features=1,
+                               activation_class=nn.ReLU), in_keys=["action", "observation"])
+    loss = SACLoss(copy.deepcopy(actor), qvalue, num_qvalue_nets=2, loss_function="l2",
+                   alpha_init=cfg.sac.alpha_init, target_entropy=-ACTION_DIM / 2,
+                   delay_qvalue=True)
     loss.make_value_estimator(gamma=cfg.sac.gamma)
     target = SoftUpdate(loss, tau=cfg.sac.tau)
     optimizer = torch.optim.Adam(loss.parameters(), lr=cfg.sac.lr, fused=True)
@@ -261,14 +266,15 @@ def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict
     recipe = cycling(setup["update_sac"], batches)
     flops = counted_flops(recipe)
     recipe_seconds = seconds_per_call(recipe, min_seconds=minimum, warmup_calls=5)
-    torchrl_seconds = seconds_per_call(cycling(torchrl_sac_update(setup), batches),
+    torchrl_seconds = seconds_per_call(cycling(torchrl_sac_update(setup["cfg"], setup["actor"]),
+                                               batches),
                                        min_seconds=minimum, warmup_calls=5)
     plain = PlainSAC(setup["cfg"])
     plain_seconds = seconds_per_call(cycling(plain.update, batches), min_seconds=minimum,
                                      warmup_calls=5)
-    # The recipe never compiles its CPU SAC update: this row is why. TorchRL's loss compiles
-    # with vmap only (its loop over the critics recompiles at every call).
-    compiled_update = cycling(torch.compile(torchrl_sac_update(setup), mode=mode), batches)
+    # The recipe never compiles its CPU SAC update: this row is why.
+    compiled_update = cycling(torch.compile(training_setup(tmp, 256)["update_sac"], mode=mode),
+                              batches)
     start = time.perf_counter()
     for _ in range(3):
         compiled_update()
@@ -284,7 +290,7 @@ def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict
         {"measure": "SAC update, recipe, eager (ms)", "project": 1000 * recipe_seconds,
          "reference": 1000 * plain_seconds, "reference is": "plain PyTorch (CleanRL's shape)",
          "ratio": plain_seconds / recipe_seconds},
-        {"measure": f"SAC update, TorchRL SACLoss compiled ({mode}; compile "
+        {"measure": f"SAC update, recipe compiled ({mode}; compile "
                     f"{compile_seconds:.0f} s) (ms)",
          "project": 1000 * compiled_seconds, "reference": 1000 * recipe_seconds,
          "reference is": "the recipe's eager update", "ratio": recipe_seconds / compiled_seconds},
@@ -552,8 +558,8 @@ def sequence_rows(tmp: Path, quick: bool) -> list[dict]:
 def plain_sac_steps_per_second(cfg, episodes: int) -> float:
     """The reference: TorchRL env.step + per-step buffer extend + SACLoss update, no VLM."""
     env = make_env(cfg.env.task, cfg.env.seed, max_episode_steps=cfg.env.max_episode_steps)
-    actor, qvalue = factories.make_sac_agent(cfg, env)
-    loss, updater, optimizer = factories.make_sac_loss(cfg, actor, qvalue, 4)
+    actor, _ = factories.make_sac_agent(cfg, env)
+    update = torchrl_sac_update(cfg, actor)
     buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(episodes * 1000),
                                     batch_size=cfg.sac.batch_size)
     steps = 0
@@ -567,11 +573,7 @@ def plain_sac_steps_per_second(cfg, episodes: int) -> float:
             buffer.add(tensordict.select("observation", "action", "next"))
             steps += 1
             if steps > cfg.env.max_episode_steps:  # the recipe updates from its 2nd episode on
-                losses = loss(buffer.sample())
-                optimizer.zero_grad()
-                (losses["loss_actor"] + losses["loss_qvalue"] + losses["loss_alpha"]).backward()
-                optimizer.step()
-                updater.step()
+                update(buffer.sample())
             if tensordict["next", "done"].item():
                 break
             tensordict = step_mdp(tensordict)
