@@ -11,6 +11,7 @@ from helpers import QUICK, RECIPES, config
 from helpers import episode_csv_rows as episode_rows
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
+from torchrl.modules import MLP, ValueOperator
 
 import temporal_torchrl.training.episodes as episodes_module
 from temporal_torchrl.runs import RunDirectory, default_run_dir, override_keys, resumed_config
@@ -291,6 +292,26 @@ def test_kill_and_resume_continues_the_run(tmp_path):
     assert set(points[5]) == {"step", "summary/ttfs", "summary/tt50s"}
     assert summary["episodes"] == 4 and summary["env_steps"] == 80
     assert RunDirectory(run_dir).load_checkpoint()["inserted"] == 4
+
+
+def test_a_checkpoint_of_torchrls_sac_loss_is_refused_with_the_way_out(tmp_path):
+    """A run checkpointed by the version that trained with TorchRL's SACLoss (critics as
+    functional parameters) cannot resume here: the error names the version that can."""
+    from torchrl.objectives import SACLoss
+
+    sac_temporal.train(config(tmp_path, "train.episodes=2", "train.stop_after_episodes=1"))
+    run = RunDirectory(tmp_path / "run")
+    checkpoint = run.load_checkpoint()
+    env = factories.make_environment(config(tmp_path), None, None)
+    actor, _ = factories.make_sac_agent(config(tmp_path), env)
+    env.close()
+    qvalue = ValueOperator(MLP(in_features=43, num_cells=[256, 256], out_features=1),
+                           in_keys=["action", "observation"])
+    checkpoint["sac_loss"] = SACLoss(actor, qvalue, num_qvalue_nets=2,
+                                     target_entropy=-2.0).state_dict()
+    run.save_checkpoint(checkpoint)
+    with pytest.raises(ValueError, match="git checkout 13c6d64"):
+        sac_temporal.train(config(tmp_path, "train.episodes=2", "resume=true"))
 
 
 def test_resume_continues_with_the_saved_config(tmp_path, capsys):

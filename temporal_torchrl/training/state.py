@@ -100,6 +100,12 @@ class TrainingState:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore the modules and the counters (the random generators: :func:`set_rng_state`
         with ``state["rng"]``, once the build's own draws are done)."""
+        if "qvalue_network_params.module.0.weight" in state["sac_loss"]:
+            raise ValueError(
+                "this checkpoint's SAC agent was saved by TorchRL's SACLoss (temporal-torchrl "
+                "before the stacked critics, commit 13c6d64 and earlier), whose critics this "
+                "version cannot load. Resume the run with that version (git checkout 13c6d64), "
+                "or start it afresh in a new output_dir.")
         self.sac_loss.load_state_dict(state["sac_loss"])
         self.sac_optimizer.load_state_dict(state["sac_optimizer"])
         for name in ("reward", "trainer", "relay"):
