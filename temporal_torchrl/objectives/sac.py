@@ -78,17 +78,18 @@ class StackedCriticSACLoss(LossModule):
     tanh-Gaussian actor and stacked critics (:class:`StackedQValueNetwork`), with target
     critics updated by Polyak averaging (:meth:`update_target_critics`).
 
-    For a batch (s, a, r, s', terminated), with a' ~ pi(.|s') and ã ~ pi(.|s) reparametrised:
+    For a batch ``(s, a, r, s', terminated)``, with ``a' ~ pi(.|s')`` and ``ã ~ pi(.|s)``
+    reparametrised, and ``Q̄`` the target critics:
 
-    - ``loss_qvalue`` = mean over the batch of sum_i (Q_i(s, a) - y)^2, with
-      y = r + gamma (1 - terminated) (min_i Q̄_i(s', a') - alpha log pi(a'|s')) and Q̄ the
-      target critics;
-    - ``loss_actor`` = mean(alpha log pi(ã|s) - min_i Q_i(s, ã)), the critics' weights detached;
-    - ``loss_alpha`` = mean(-log alpha (log pi(ã|s) + target_entropy)).
+    - ``loss_qvalue`` = ``mean_batch sum_i (Q_i(s, a) - y)^2``, with
+      ``y = r + gamma (1 - terminated) (min_i Q̄_i(s', a') - alpha log pi(a'|s'))``;
+    - ``loss_actor`` = ``mean(alpha log pi(ã|s) - min_i Q_i(s, ã))``, the critics' weights
+      detached;
+    - ``loss_alpha`` = ``mean(-log alpha (log pi(ã|s) + target_entropy))``.
 
     These are TorchRL's ``SACLoss(num_qvalue_nets=2, loss_function="l2", delay_qvalue=True)``
     with a TD(0) value estimator, computed in the same order from the same random draws
-    (tests/test_sac_loss.py checks both against each other).
+    (``tests/test_sac_loss.py`` checks one against the other).
 
     Args:
         actor: the policy (a :class:`~torchrl.modules.ProbabilisticActor` whose distribution
