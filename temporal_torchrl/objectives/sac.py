@@ -128,8 +128,6 @@ class StackedCriticSACLoss(LossModule):
         self.target_critics = copy.deepcopy(critics).requires_grad_(False)
         self.log_alpha = nn.Parameter(torch.tensor(math.log(alpha_init)))
         self.gamma, self.tau, self.target_entropy = gamma, tau, target_entropy
-        self._target_pairs = (list(self.target_critics.parameters()),
-                              list(self.critics.parameters()))
 
     @property
     def in_keys(self) -> list:
@@ -166,4 +164,5 @@ class StackedCriticSACLoss(LossModule):
     @torch.no_grad()
     def update_target_critics(self) -> None:
         """One Polyak step of the target critics towards the critics."""
-        torch._foreach_lerp_(*self._target_pairs, self.tau)
+        torch._foreach_lerp_(list(self.target_critics.parameters()),
+                             list(self.critics.parameters()), self.tau)
