@@ -3,7 +3,7 @@
 Sections (``--sections``, default all), each row next to its reference measured in the same run:
 
 sac     the SAC update alone (batch 256, (256, 256) networks, fused Adam): the recipe's eager
-        update (``StackedCriticSACLoss``, only SAC's keys) against its compute bound, against
+        update (``StackedCriticSACLoss``) against its compute bound, against
         TorchRL's ``SACLoss`` as its docs build it (vmap over the critics, the whole replay
         batch) and against a plain-PyTorch twin-critic update; the recipe's update compiled
         (``torch.compile``: the recipe compiles it on a GPU only) against it eager.

@@ -105,3 +105,11 @@ def test_stacked_critics_are_independent_mlps():
 def test_a_stack_without_critics_is_refused():
     with pytest.raises(ValueError, match="at least 1"):
         StackedQValueNetwork(0, in_features=5, num_cells=[8])
+
+
+def test_inputs_of_the_wrong_size_are_refused_not_reshaped():
+    """4 states of 3 + 2 features fill 20 values, which a 4-feature stack could reshape into 5
+    rows: the stack refuses them instead."""
+    critics = StackedQValueNetwork(2, in_features=4, num_cells=[8])
+    with pytest.raises(ValueError, match="in_features = observation"):
+        critics(torch.randn(4, 3), torch.randn(4, 2))

@@ -60,8 +60,14 @@ class StackedQValueNetwork(nn.Module):
                 detach_parameters: bool = False) -> torch.Tensor:
         """Q_i(observation, action) of every critic, shape ``(num_critics, *batch)``; with
         ``detach_parameters`` no gradient reaches the weights (SAC's actor loss)."""
+        in_features = self.weights[0].shape[1]
+        if observation.shape[-1] + action.shape[-1] != in_features:
+            raise ValueError(
+                f"StackedQValueNetwork: an observation of {observation.shape[-1]} and an action "
+                f"of {action.shape[-1]} features for critics built with in_features="
+                f"{in_features}; build them with in_features = observation + action size.")
         batch_shape = observation.shape[:-1]
-        features = torch.cat([observation, action], -1).reshape(1, -1, self.weights[0].shape[1])
+        features = torch.cat([observation, action], -1).reshape(1, -1, in_features)
         last = len(self.weights) - 1
         for layer, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
             if detach_parameters:
