@@ -14,11 +14,14 @@ heads   the reward-head update alone (FuRL's ranking loss and D3's directional l
 step    the training step as the recipe runs it: one reward-head update, one SAC batch sampled
         and relabelled, one SAC update; stage 2, D = 1024. Eager against the compute bound, and
         compiled (``torch.compile``) against eager in ``--repeats`` fresh builds (min, median,
-        max), with the compile time of the first.
+        max), with the compile time of the first; and compile's ceiling: the eager step with
+        the parts it compiles (the head losses' forward and backward, the relabelling's reward)
+        cut to their matmuls alone.
 loop    the whole default loop (the shipped encoder at 64 px, FuRL + D3, stage 1 with relay, 1
         env, eager), env steps/s in the steady state (the 3rd and 4th episodes, timed at their
         ends: the 1st has no updates), against its bound (its env side, measured without
-        updates, plus its updates' FLOPs at the GEMM rate) and, with ``--baseline-rev REV``,
+        updates, plus its updates' FLOPs at the GEMM rate), its ceiling (the env side plus its
+        updates' matmuls alone) and, with ``--baseline-rev REV``,
         against that git revision's loop, run from a worktree by this script in a subprocess;
         d_sequence against D3 in the same loop (state encoder, D = 1024).
 grid    the whole recipe for the state encoder (D = 1024), the shipped encoder and a
@@ -32,7 +35,11 @@ replay  sampling 256 transitions with their histories at 500,000 transitions (D 
         batch; the replay memory against storing s_t and s_{t+1} in float32.
 
 Compute bounds: the FLOPs torch's profiler counts (``with_flops``: the matrix products) divided
-by this machine's fp32 GEMM rate (a 2048^3 matmul, measured in the same run).
+by this machine's fp32 GEMM rate (a 2048^3 matmul, measured in the same run). Matmuls alone:
+the matrix products one call dispatches, forward and backward, recorded and replayed by
+themselves at their shapes and strides; their share of the time bounds what any speed-up
+that keeps the same matmul kernels (compile included) can give, and the loop's ceiling is its
+env side plus its updates' matmuls alone.
 ``--threads`` sets torch's threads (default: all cores). ``--quick`` shortens everything.
 """
 
@@ -56,6 +63,7 @@ from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 from torch import nn
 from torch.profiler import ProfilerActivity, profile
+from torch.utils._python_dispatch import TorchDispatchMode
 from torchrl.data import LazyTensorStorage, SliceSampler, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 from torchrl.modules import MLP, ValueOperator
@@ -152,6 +160,61 @@ def bound_row(measure: str, seconds: float, flops: float, peak: float) -> dict:
     return {"measure": measure, "project": 1000 * seconds, "reference": 1000 * bound,
             "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {peak / 1e9:.0f} GFLOP/s "
                             "GEMM", "ratio": bound / seconds}
+
+
+class MatmulRecorder(TorchDispatchMode):
+    """Records the matrix products dispatched inside it, forward and backward: each one's op,
+    its tensor arguments' shapes, strides and dtypes, and its other arguments."""
+
+    MATMULS = (torch.ops.aten.mm, torch.ops.aten.addmm, torch.ops.aten.bmm,
+               torch.ops.aten.baddbmm)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls: list[tuple] = []
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        if func.overloadpacket in self.MATMULS:
+            layout = [(a.shape, a.stride(), a.dtype) if isinstance(a, torch.Tensor) else a
+                      for a in args]
+            self.calls.append((func, layout, kwargs))
+        return func(*args, **kwargs)
+
+
+def matmuls_alone(fn):
+    """A call running only the matrix products that one call of ``fn`` (after a warm-up call)
+    dispatches, forward and backward, on random operands of the same shapes, strides and
+    dtypes: ``fn`` as if everything but its matmuls took no time."""
+    fn()
+    recorder = MatmulRecorder()
+    with recorder:
+        fn()
+
+    def operand(argument):
+        if not (isinstance(argument, tuple) and len(argument) == 3
+                and isinstance(argument[2], torch.dtype)):
+            return argument
+        shape, stride, dtype = argument
+        storage = 1 + sum((size - 1) * step for size, step in zip(shape, stride, strict=True))
+        return torch.randn(storage, dtype=dtype).as_strided(shape, stride)
+
+    calls = [(func, [operand(a) for a in layout], kwargs)
+             for func, layout, kwargs in recorder.calls]
+
+    def replay() -> None:
+        for func, args, kwargs in calls:
+            func(*args, **kwargs)
+
+    return replay
+
+
+def matmul_row(measure: str, seconds: float, matmul_seconds: float) -> dict:
+    """``seconds`` against its matmuls alone: the ratio is the share of its time they take, and
+    its inverse the most that any speed-up keeping the same matmul kernels can give."""
+    return {"measure": measure, "project": 1000 * seconds, "reference": 1000 * matmul_seconds,
+            "reference is": "its matmuls alone (replayed at their shapes)",
+            "ratio": matmul_seconds / seconds}
 
 
 def gemm_flops_per_second(size: int = 2048) -> float:
@@ -266,6 +329,8 @@ def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict
     recipe = cycling(setup["update_sac"], batches)
     flops = counted_flops(recipe)
     recipe_seconds = seconds_per_call(recipe, min_seconds=minimum, warmup_calls=5)
+    matmul_seconds = seconds_per_call(matmuls_alone(recipe), min_seconds=minimum,
+                                      warmup_calls=5)
     torchrl_seconds = seconds_per_call(cycling(torchrl_sac_update(setup["cfg"], setup["actor"]),
                                                batches),
                                        min_seconds=minimum, warmup_calls=5)
@@ -283,6 +348,7 @@ def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict
     print(f"sac: {flops / 1e9:.3f} GFLOP; compiled in {compile_seconds:.0f} s", flush=True)
     return [
         bound_row("SAC update, recipe, eager (ms)", recipe_seconds, flops, peak),
+        matmul_row("SAC update, recipe, eager (ms)", recipe_seconds, matmul_seconds),
         {"measure": "SAC update, recipe, eager (ms)", "project": 1000 * recipe_seconds,
          "reference": 1000 * torchrl_seconds,
          "reference is": "TorchRL SACLoss as documented (vmap critics, whole batch)",
@@ -350,8 +416,11 @@ def heads_rows(tmp: Path, quick: bool, peak: float) -> list[dict]:
         flops = counted_flops(trainer.update)
         seconds = seconds_per_call(trainer.update, min_seconds=minimum, warmup_calls=5)
         reference_seconds = seconds_per_call(reference, min_seconds=minimum, warmup_calls=5)
+        matmul_seconds = seconds_per_call(matmuls_alone(trainer.update), min_seconds=minimum,
+                                          warmup_calls=5)
         measure = f"reward-head update, FuRL + D3, stage 2, D={dim}, eager (ms)"
         rows += [bound_row(measure, seconds, flops, peak),
+                 matmul_row(measure, seconds, matmul_seconds),
                  {"measure": measure, "project": 1000 * seconds,
                   "reference": 1000 * reference_seconds,
                   "reference is": "term by term, one backward per loss",
@@ -360,6 +429,21 @@ def heads_rows(tmp: Path, quick: bool, peak: float) -> list[dict]:
 
 
 # --------------------------------------------------------------------------- step
+def compiled_regions(tmp: Path) -> list:
+    """The parts of the step that ``compile.enabled`` compiles on a CPU, eager, each on a fixed
+    batch: the reward-head losses' forward and backward, and the relabelling's reward call."""
+    setup = training_setup(tmp, 1024)
+    trainer, buffer = setup["trainer"], setup["buffer"]
+    batch = trainer.replay.sample(trainer.batch_size)
+    relabel = buffer.transform[-1]
+    transitions = buffer.sample()
+
+    def losses() -> None:
+        torch.stack([loss(batch)[loss.loss_key] for loss in trainer.losses]).sum().backward()
+
+    return [losses, lambda: relabel(transitions)]
+
+
 def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
               repeats: int) -> list[dict]:
     """Eager against the bound; compiled against eager in ``repeats`` fresh builds (dynamo
@@ -367,6 +451,14 @@ def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
     and the first too when an earlier run on the machine filled it)."""
     minimum = 1.0 if quick else 4.0
     flops = counted_flops(training_step(False, tmp))
+    matmul_seconds = seconds_per_call(matmuls_alone(training_step(False, tmp)),
+                                      min_seconds=minimum, warmup_calls=5)
+    # What compile could give if it removed everything but the matmuls of what it compiles.
+    regions = compiled_regions(tmp)
+    region_seconds = sum(seconds_per_call(fn, min_seconds=minimum, warmup_calls=5)
+                         for fn in regions)
+    region_matmul_seconds = sum(seconds_per_call(matmuls_alone(fn), min_seconds=minimum,
+                                                 warmup_calls=5) for fn in regions)
     eager_times, compiled_times, compile_times = [], [], []
     for _ in range(repeats):
         torch._dynamo.reset()
@@ -386,6 +478,8 @@ def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
                                        statistics.median(compiled_times))
     return [
         bound_row(f"training step, eager, median of {repeats} (ms)", eager_seconds, flops, peak),
+        matmul_row(f"training step, eager, median of {repeats} (ms)", eager_seconds,
+                   matmul_seconds),
         bound_row(f"training step, compiled ({mode}), median of {repeats} (ms)",
                   compiled_seconds, flops, peak),
         {"measure": f"training step, compiled vs eager (speed-up, {repeats} builds: min / "
@@ -395,6 +489,12 @@ def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
                     "others)",
          "project": speedups[0], "reference": 1.0, "reference is": "eager (min shown)",
          "ratio": speedups[0]},
+        {"measure": f"training step, compile's ceiling: eager with the compiled parts "
+                    f"({1000 * region_seconds:.1f} ms eager) cut to their matmuls "
+                    f"({1000 * region_matmul_seconds:.1f} ms) (speed-up)",
+         "project": eager_seconds / (eager_seconds - region_seconds + region_matmul_seconds),
+         "reference": 1.0, "reference is": "eager",
+         "ratio": eager_seconds / (eager_seconds - region_seconds + region_matmul_seconds)},
     ]
 
 
@@ -526,9 +626,15 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     # Per env step in stage 1 with relay: one head update, one SAC batch, two SAC updates.
     setup = training_setup(tmp, 256, stage=1)
     batch = setup["buffer"].sample()
-    flops = (counted_flops(setup["trainer"].update) + counted_flops(setup["buffer"].sample)
-             + 2 * counted_flops(lambda: setup["update_sac"](batch)))
+    updates = (setup["trainer"].update, setup["buffer"].sample,
+               lambda: setup["update_sac"](batch))
+    weights = (1, 1, 2)
+    flops = sum(n * counted_flops(fn) for n, fn in zip(weights, updates, strict=True))
     bound = 1.0 / (1.0 / env_rate + flops / peak)
+    matmul_seconds = sum(n * seconds_per_call(matmuls_alone(fn), min_seconds=2.0,
+                                              warmup_calls=5)
+                         for n, fn in zip(weights, updates, strict=True))
+    ceiling = 1.0 / (1.0 / env_rate + matmul_seconds)
     print(f"default loop: env side {env_rate:.1f} steps/s, updates {flops / 1e9:.2f} GFLOP a "
           "step", flush=True)
     rows = [{"measure": f"whole default loop, shipped encoder 64 px, 1 env, eager, median of "
@@ -537,7 +643,11 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
             {"measure": f"whole default loop, bound: its env side ({env_rate:.1f} steps/s "
                         f"without updates) + {flops / 1e9:.2f} GFLOP of updates a step at "
                         f"{peak / 1e9:.0f} GFLOP/s (env steps/s)", "project": bound,
-             "reference": today, "reference is": today_is, "ratio": bound / today}]
+             "reference": today, "reference is": today_is, "ratio": bound / today},
+            {"measure": f"whole default loop, ceiling: its env side + its updates' matmuls "
+                        f"alone ({1000 * matmul_seconds:.1f} ms a step) (env steps/s)",
+             "project": ceiling, "reference": today, "reference is": today_is,
+             "ratio": ceiling / today}]
     return rows
 
 

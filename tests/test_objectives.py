@@ -137,6 +137,33 @@ def test_finetuning_batches_never_hold_the_reset_frame():
     assert set(batch["positive_pair", "earlier", "step"].tolist()) == set(range(1, 7))
 
 
+def test_joining_the_finetuning_groups_copies_nothing():
+    """The layout converts all the groups' embeddings in one tensor, so the losses' joins of
+    consecutive groups are views of it; any other join is torch.cat's, gradients included."""
+    from helpers import make_episode
+
+    from temporal_torchrl.objectives.finetuning import _joined
+
+    buffer = EpisodeReplayBuffer(capacity=300, history=2)
+    buffer.extend(episode_rows(make_episode(0, 20)))
+    buffer.extend(episode_rows(make_episode(1, 20, successes=(15,))))
+    batch = buffer.finetuning.sample(8)
+    groups = [batch["negative"], batch["positive"], batch["positive_pair", "later"],
+              batch["positive_pair", "earlier"]]
+    for key in ("embedding", "initial_embedding", "previous_embedding"):
+        parts = [states[key] for states in groups]
+        joined = _joined(parts)
+        torch.testing.assert_close(joined, torch.cat(parts), rtol=0, atol=0)
+        assert joined.data_ptr() == parts[0].data_ptr()  # a view: nothing copied
+    reordered = [batch["positive", "embedding"], batch["negative", "embedding"]]
+    joined = _joined(reordered)
+    torch.testing.assert_close(joined, torch.cat(reordered), rtol=0, atol=0)
+    assert joined.data_ptr() != reordered[0].data_ptr()
+    trained = batch["negative", "embedding"].clone().requires_grad_()
+    _joined([trained, batch["positive", "embedding"]]).sum().backward()
+    torch.testing.assert_close(trained.grad, torch.ones_like(trained))
+
+
 def test_directional_release_option_scores_contrast_at_plain_position():
     torch.manual_seed(2)
     dim = 6

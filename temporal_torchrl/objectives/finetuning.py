@@ -251,9 +251,7 @@ class DirectionalLoss(LossModule):
 
             def joined(field: str, chosen: list[_DirectionTerm] = chosen) -> Tensor | None:
                 values = [getattr(term, field) for term in chosen]
-                if values[0] is None or len(values) == 1:
-                    return values[0]
-                return torch.cat(values)
+                return None if values[0] is None else _joined(values)
 
             scores = self.reward.directional_reward(
                 joined("end"), joined("start"), joined("initial"), position=joined("position"),
@@ -445,9 +443,32 @@ def _split_call(function: Callable[[TensorDictBase], Tensor],
     if len(groups) == 1:  # stage 1: the negatives alone, nothing to join
         (name, states), = groups.items()
         return {name: function(states)}
-    joined = torch.cat([states.select(*keys) for states in groups.values()])
-    values = function(joined).split([states.shape[0] for states in groups.values()])
+    sizes = [states.shape[0] for states in groups.values()]
+    joined = TensorDict({key: _joined([states[key] for states in groups.values()])
+                         for key in keys}, [sum(sizes)])
+    values = function(joined).split(sizes)
     return dict(zip(groups, values, strict=True))
+
+
+def _joined(tensors: list[Tensor]) -> Tensor:
+    """``torch.cat(tensors)``, as a view when the tensors lie one after the other in one storage,
+    as the finetuning batch's groups do (:class:`~temporal_torchrl.data.FinetuningLayout`
+    converts all their embeddings in one tensor): joining the groups then copies nothing."""
+    first = tensors[0]
+    if len(tensors) == 1:
+        return first
+    if first.dim() == 0 or any(tensor.requires_grad for tensor in tensors):
+        return torch.cat(tensors)
+    storage, offset = first.untyped_storage().data_ptr(), first.storage_offset()
+    for tensor in tensors:
+        if not (tensor.dtype == first.dtype and tensor.device == first.device
+                and tensor.shape[1:] == first.shape[1:] and tensor.stride() == first.stride()
+                and tensor.untyped_storage().data_ptr() == storage
+                and tensor.storage_offset() == offset):
+            return torch.cat(tensors)
+        offset += tensor.shape[0] * first.stride(0)
+    rows = sum(tensor.shape[0] for tensor in tensors)
+    return first.as_strided((rows, *first.shape[1:]), first.stride(), first.storage_offset())
 
 
 def _window(states: TensorDictBase, length: int | None) -> Tensor | None:
