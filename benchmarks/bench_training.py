@@ -21,9 +21,9 @@ loop    the whole default loop (the shipped encoder at 64 px, FuRL + D3, stage 1
         env, eager), env steps/s in the steady state (the 3rd and 4th episodes, timed at their
         ends: the 1st has no updates), against its bound (its env side, measured without
         updates, plus its updates' FLOPs at the GEMM rate), its ceiling (the env side plus its
-        updates' matmuls alone) and, with ``--baseline-rev REV``,
-        against that git revision's loop, run from a worktree by this script in a subprocess;
-        d_sequence against D3 in the same loop (state encoder, D = 1024).
+        updates' matmuls alone) and, with ``--baseline-rev REV``, against that git revision's
+        loop, run from a worktree by this script in a subprocess; d_sequence against D3 in the
+        same loop (state encoder, D = 1024; three rounds each, alternating).
 grid    the whole recipe for the state encoder (D = 1024), the shipped encoder and a
         random-weight LIV at 224 px; ``env.num_envs`` 1, 2 and 4, eager and compiled; against
         the loop of one env, eager, of the same encoder; with CUDA also LIV with 16 envs,
@@ -651,17 +651,24 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     return rows
 
 
-def sequence_rows(tmp: Path, quick: bool) -> list[dict]:
-    """d_sequence (K = 8) against D3 in the same loop: state encoder D = 1024, 1 env, eager."""
+def sequence_rows(tmp: Path, quick: bool, rounds: int = 3) -> list[dict]:
+    """d_sequence (K = 8) against D3 in the same loop: state encoder D = 1024, 1 env, eager;
+    ``rounds`` runs of each, alternating, and the medians."""
     length = 20 if quick else 100
     common = ["encoder.name=state", "+encoder.options.dim=1024"]
-    d3 = steady_steps_per_second([*common, "reward.directional=d3"], 1, length, tmp)
-    sequence = steady_steps_per_second([*common, "reward.directional=d_sequence"], 1, length,
-                                       tmp)
-    return [{"measure": "whole loop, d_sequence K=8, state encoder D=1024, 1 env, eager "
-                        "(env steps/s; ratio: D3's rate over it, the cost per env step)",
-             "project": sequence, "reference": d3, "reference is": "D3, the same loop",
-             "ratio": d3 / sequence}]
+    d3, sequence = [], []
+    for _ in range(rounds):
+        d3.append(steady_steps_per_second([*common, "reward.directional=d3"], 1, length, tmp))
+        sequence.append(steady_steps_per_second([*common, "reward.directional=d_sequence"], 1,
+                                                length, tmp))
+        print(f"d_sequence: {sequence[-1]:.1f}, D3: {d3[-1]:.1f} env steps/s", flush=True)
+    ratios = sorted(a / b for a, b in zip(d3, sequence, strict=True))
+    return [{"measure": f"whole loop, d_sequence K=8, state encoder D=1024, 1 env, eager, median "
+                        f"of {rounds} alternating (env steps/s; ratio: D3's rate over it, the "
+                        f"cost per env step; per round {' / '.join(f'{r:.2f}' for r in ratios)})",
+             "project": statistics.median(sequence), "reference": statistics.median(d3),
+             "reference is": "D3, the same loop",
+             "ratio": statistics.median(d3) / statistics.median(sequence)}]
 
 
 # --------------------------------------------------------------------------- reference
