@@ -15,7 +15,6 @@ from temporal_torchrl.rewards import (
     cosine_similarity,
     direction_certainty,
     heads_input_dims,
-    mlp_of_concatenation,
     objective_of,
     reference_scales,
     register_reward,
@@ -281,27 +280,6 @@ def test_heads_input_dims():
     heads = RewardHeads(*heads_input_dims("d3", 8))
     assert heads.image[0].in_features == 16 and heads.image[2].out_features == 64
     assert heads.text[0].out_features == 256
-
-
-def test_mlp_of_concatenation_is_the_mlp_of_the_concatenated_parts():
-    """Against ``mlp(torch.cat(...))``: the same outputs and first-layer gradients, a part
-    shared by the batch broadcasting, and parts that do not fit the first layer refused."""
-    heads = RewardHeads(*heads_input_dims("d3", D))
-    gen = torch.Generator().manual_seed(1)
-    position, direction = torch.randn(BATCH, D, generator=gen), torch.randn(BATCH, D, generator=gen)
-    split = mlp_of_concatenation(heads.image, position, direction)
-    split.sum().backward()
-    split_gradient = heads.image[0].weight.grad.clone()
-    heads.image.zero_grad()
-    joined = heads.image(torch.cat((position, direction), -1))
-    joined.sum().backward()
-    torch.testing.assert_close(split, joined)
-    torch.testing.assert_close(split_gradient, heads.image[0].weight.grad)
-    shared = mlp_of_concatenation(heads.image, position[0], direction)
-    torch.testing.assert_close(
-        shared, heads.image(torch.cat((position[0].expand(BATCH, D), direction), -1)))
-    with pytest.raises(ValueError, match=r"parts of \[5, 4\] features.*first layer of 10"):
-        mlp_of_concatenation(heads.image, position, direction[:, :4])
 
 
 # --- TemporalReward -----------------------------------------------------------------------------

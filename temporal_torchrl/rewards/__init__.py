@@ -9,12 +9,7 @@ from temporal_torchrl.rewards.certainty import (
     reference_scales,
 )
 from temporal_torchrl.rewards.directional import DIRECTIONAL, straight_window, window_tokens
-from temporal_torchrl.rewards.heads import (
-    RewardHeads,
-    SequenceEncoder,
-    heads_input_dims,
-    mlp_of_concatenation,
-)
+from temporal_torchrl.rewards.heads import RewardHeads, SequenceEncoder, heads_input_dims
 from temporal_torchrl.rewards.positional import (
     POSITIONAL,
     PROJECTIONS,
@@ -47,7 +42,6 @@ __all__ = [
     "direction_certainty",
     "goal_baseline_regularise",
     "heads_input_dims",
-    "mlp_of_concatenation",
     "objective_of",
     "reference_scales",
     "register_reward",

@@ -27,7 +27,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from temporal_torchrl.rewards.heads import RewardHeads, mlp_of_concatenation
+from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.positional import (
     _required,
     cosine_similarity,
@@ -63,9 +63,10 @@ def d2(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor
 def _concatenated(heads: RewardHeads, position_part: Tensor, direction: Tensor, g: Tensor,
                   b: Tensor) -> Tensor:
     # Separate normalisation keeps position and direction equally weighted (thesis 4.3.2, last
-    # paragraph); either part may be a single vector, which then broadcasts over the batch.
-    image = mlp_of_concatenation(heads.image, unit(position_part), unit(direction))
-    return cosine_similarity(image, heads.text(g - b))
+    # paragraph); broadcasting lets either part be a single vector.
+    position_part, direction = torch.broadcast_tensors(unit(position_part), unit(direction))
+    image_input = torch.cat((position_part, direction), dim=-1)
+    return cosine_similarity(heads.image(image_input), heads.text(g - b))
 
 
 def d3(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor, b: Tensor,

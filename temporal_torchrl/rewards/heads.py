@@ -20,29 +20,6 @@ def _mlp(in_dim: int, hidden_dim: int, out_dim: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(in_dim, hidden_dim), nn.ReLU(), nn.Linear(hidden_dim, out_dim))
 
 
-def mlp_of_concatenation(mlp: nn.Sequential, *parts: Tensor) -> Tensor:
-    """``mlp(torch.cat(parts, -1))`` for an MLP that opens with a :class:`~torch.nn.Linear`,
-    without the concatenation: the first layer's weight is split by columns, one product per
-    part, and the products are summed, broadcasting the parts' leading dimensions against each
-    other (so a part shared by the whole batch is multiplied once).
-
-    Example:
-        >>> mlp = _mlp(6, 8, 2)
-        >>> a, b = torch.randn(4, 2), torch.randn(4, 4)
-        >>> torch.allclose(mlp_of_concatenation(mlp, a, b), mlp(torch.cat((a, b), -1)), atol=1e-6)
-        True
-    """
-    first = mlp[0]
-    sizes = [part.shape[-1] for part in parts]
-    if sum(sizes) != first.in_features:
-        raise ValueError(f"mlp_of_concatenation: parts of {sizes} features for a first layer of "
-                         f"{first.in_features}; their sizes must add up to it.")
-    hidden = first.bias
-    for part, weight in zip(parts, first.weight.split(sizes, dim=-1), strict=True):
-        hidden = hidden + F.linear(part, weight)
-    return mlp[1:](hidden)
-
-
 class SequenceEncoder(nn.Module):
     """A one-layer Transformer encoder over a short sequence of tokens, pooled to one vector
     (beyond the thesis, section 6.3 proposal: "a short-horizon sequence encoder, like a
