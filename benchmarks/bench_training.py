@@ -450,9 +450,9 @@ def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
     reset before each, so each compiles anew; inductor's on-disk cache serves the later ones,
     and the first too when an earlier run on the machine filled it)."""
     minimum = 1.0 if quick else 4.0
-    flops = counted_flops(training_step(False, tmp))
-    matmul_seconds = seconds_per_call(matmuls_alone(training_step(False, tmp)),
-                                      min_seconds=minimum, warmup_calls=5)
+    step = training_step(False, tmp)
+    flops = counted_flops(step)
+    matmul_seconds = seconds_per_call(matmuls_alone(step), min_seconds=minimum, warmup_calls=5)
     # What compile could give if it removed everything but the matmuls of what it compiles.
     regions = compiled_regions(tmp)
     region_seconds = sum(seconds_per_call(fn, min_seconds=minimum, warmup_calls=5)
@@ -476,6 +476,7 @@ def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
     speedups = sorted(e / c for e, c in zip(eager_times, compiled_times, strict=True))
     eager_seconds, compiled_seconds = (statistics.median(eager_times),
                                        statistics.median(compiled_times))
+    ceiling = eager_seconds / (eager_seconds - region_seconds + region_matmul_seconds)
     return [
         bound_row(f"training step, eager, median of {repeats} (ms)", eager_seconds, flops, peak),
         matmul_row(f"training step, eager, median of {repeats} (ms)", eager_seconds,
@@ -492,9 +493,7 @@ def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
         {"measure": f"training step, compile's ceiling: eager with the compiled parts "
                     f"({1000 * region_seconds:.1f} ms eager) cut to their matmuls "
                     f"({1000 * region_matmul_seconds:.1f} ms) (speed-up)",
-         "project": eager_seconds / (eager_seconds - region_seconds + region_matmul_seconds),
-         "reference": 1.0, "reference is": "eager",
-         "ratio": eager_seconds / (eager_seconds - region_seconds + region_matmul_seconds)},
+         "project": ceiling, "reference": 1.0, "reference is": "eager", "ratio": ceiling},
     ]
 
 
