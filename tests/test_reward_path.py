@@ -128,9 +128,9 @@ def test_a_window_reward_sees_the_same_window_everywhere(tmp_path):
     padded with s_0 at each episode's start."""
     seen = {"env": {}, "relabel": {}, "finetune": {}}
 
-    def recording(heads, s, *, window=None, g, b, position=None, **unused):
-        assert window is not None, "every call site must pass the window"
+    def recording(heads, s, *, s_prev=None, window=None, g, b, position=None, **unused):
         if position is None:
+            assert window is not None, "every call site must pass the window"
             site = ("finetune" if torch.is_grad_enabled() else
                     "env" if s.ndim == 1 else "relabel")
             for state, states in zip(s.reshape(-1, s.shape[-1]),
@@ -138,7 +138,8 @@ def test_a_window_reward_sees_the_same_window_everywhere(tmp_path):
                 assert torch.equal(states[-1], state)
                 seen[site].setdefault(tuple(state.tolist()), set()).add(
                     tuple(map(tuple, states.tolist())))
-        return DIRECTIONAL["d_sequence"](heads, s, window=window, g=g, b=b, position=position)
+        return DIRECTIONAL["d_sequence"](heads, s, s_prev=s_prev, window=window, g=g, b=b,
+                                         position=position)
 
     register_reward("recording_d", recording, kind="directional", image_input="window")
     try:

@@ -11,6 +11,7 @@ from temporal_torchrl.rewards import (
     OBJECTIVES,
     POSITIONAL,
     RewardHeads,
+    SequenceEncoder,
     TemporalReward,
     cosine_similarity,
     direction_certainty,
@@ -527,6 +528,50 @@ def test_d_sequence_is_csim_of_the_sequence_encoder_over_its_tokens(embeddings):
         heads.image.forward_with_context(torch.zeros(BATCH, 3), window_tokens(window))
 
 
+def test_d_sequence_of_the_straight_path_without_its_window(embeddings):
+    """window=None: the straight path from s_prev to s, scored with its one token embedded once,
+    equals the encoder run on the tokens of the window straight_window builds, at s_t and at
+    the default position s; TemporalReward reaches it with straight_path=True only."""
+    s, s0, s_prev, _, g, b = embeddings
+    heads = make_heads("d_sequence")
+    straight = straight_window(s_prev, s, WINDOW)
+    for position in (s_prev, None):
+        expected = F.cosine_similarity(heads.image(window_tokens(straight, position)),
+                                       heads.text(g - b).expand(BATCH, -1), dim=-1)
+        torch.testing.assert_close(
+            DIRECTIONAL["d_sequence"](heads, s, s_prev=s_prev, g=g, b=b, position=position),
+            expected, rtol=1e-5, atol=1e-6)
+    reward = _temporal(positional=None, directional="d_sequence", window_length=WINDOW)
+    expected = DIRECTIONAL["d_sequence"](
+        reward.directional_heads, s, window=straight_window(s_prev, s, WINDOW), position=s_prev,
+        g=reward.goal_embedding, b=reward.baseline_embedding)
+    torch.testing.assert_close(reward.directional_reward(s, s_prev, s0, position=s_prev,
+                                                         straight_path=True),
+                               expected, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="reads the window of the last 4 embeddings"):
+        reward.directional_reward(s, s_prev, s0)
+    with pytest.raises(ValueError, match="pass window=None with it"):
+        reward.directional_reward(s, s_prev, s0, window=straight, straight_path=True)
+
+
+def test_sequence_encoder_embeds_broadcast_tokens_once():
+    """Tokens expanded over the sequence take the embed-once path and give the encoder's output
+    on the same tokens materialised, gradients included."""
+    torch.manual_seed(3)
+    encoder = SequenceEncoder(token_dim=6, length=5, hidden_dim=16, out_dim=4, width=8,
+                              heads=2)
+    context, token = torch.randn(7, 2), torch.randn(7, 1, 4, requires_grad=True)
+    expanded = token.expand(7, 5, 4)
+    assert expanded.stride(-2) == 0
+    fast = encoder.forward_with_context(context, expanded)
+    (fast_grad,) = torch.autograd.grad(fast.sum(), token)
+    materialised = torch.cat([context.unsqueeze(-2).expand(7, 5, 2), expanded], -1).contiguous()
+    slow = encoder(materialised)
+    (slow_grad,) = torch.autograd.grad(slow.sum(), token)
+    torch.testing.assert_close(fast, slow, rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(fast_grad, slow_grad, rtol=1e-5, atol=1e-6)
+
+
 def test_d_sequence_reads_the_order_of_the_steps(embeddings):
     s, s0, s_prev, _, g, b = embeddings
     heads = make_heads("d_sequence")
@@ -536,7 +581,7 @@ def test_d_sequence_reads_the_order_of_the_steps(embeddings):
     assert not torch.allclose(forward, DIRECTIONAL["d_sequence"](heads, s, window=shuffled,
                                                                  g=g, b=b))
     with pytest.raises(ValueError, match="needs window"):
-        DIRECTIONAL["d_sequence"](heads, s, s_prev=s_prev, g=g, b=b)
+        DIRECTIONAL["d_sequence"](heads, s, g=g, b=b)
     with pytest.raises(ValueError, match=r"expected \[\.\.\., 3, 10\]"):
         DIRECTIONAL["d_sequence"](heads, s, window=path(s, s_prev)[:, 1:], g=g, b=b)
 

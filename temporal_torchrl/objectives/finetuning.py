@@ -41,7 +41,6 @@ from temporal_torchrl.rewards import (
     direction_certainty,
     objective_of,
     reference_scales,
-    straight_window,
 )
 
 #: The release's optimizer settings for the heads (prior-implementations.md).
@@ -150,9 +149,10 @@ class DirectionalLoss(LossModule):
     A reward that reads a window (d_sequence; beyond the thesis, section 6.3 proposal) gets the
     same terms with paths in place of directions, all at the position s_t: the observed window
     W_t = (s_{t-K+1} .. s_t); towards the goal the straight window from s_t to s_g
-    (:func:`~temporal_torchrl.rewards.straight_window`: every step along s_g - s_t); opposite,
-    W_t reversed (s_t .. s_{t-K+1}: every step negated, in reverse order). With K = 2 these are
-    D3's three directions with k = 1.
+    (:func:`~temporal_torchrl.rewards.straight_window`: every step along s_g - s_t, scored with
+    ``straight_path=True``, so the reward need not build it); opposite, W_t reversed
+    (s_t .. s_{t-K+1}: every step negated, in reverse order). With K = 2 these are D3's three
+    directions with k = 1.
 
     The terms are scored in two reward calls (the observed directions of both groups, then the
     contrasted ones), each one batch through the heads; a window reward's terms one by one.
@@ -210,8 +210,8 @@ class DirectionalLoss(LossModule):
             window = _window(negative, length)
             terms["negative_observed"] = _DirectionTerm.observed(negative, variant, window)
             terms["towards_goal"] = _DirectionTerm(
-                contrast_variant, s_g, s_t, negative["initial_embedding"], s_t,
-                None if window is None else straight_window(s_t, s_g, length))
+                contrast_variant, s_g, s_t, negative["initial_embedding"], s_t, None,
+                straight_path=length is not None)
         if stage == 2:
             positive = tensordict["positive"]
             s_t, s_tk = positive["embedding"], positive["previous_embedding"]
@@ -255,7 +255,8 @@ class DirectionalLoss(LossModule):
 
             scores = self.reward.directional_reward(
                 joined("end"), joined("start"), joined("initial"), position=joined("position"),
-                variant=chosen[0].variant, window=joined("window"))
+                variant=chosen[0].variant, window=joined("window"),
+                straight_path=chosen[0].straight_path)
             rewards.update(zip(names, scores.split([term.end.shape[0] for term in chosen]),
                                strict=True))
         return rewards
@@ -264,7 +265,8 @@ class DirectionalLoss(LossModule):
 @dataclass(frozen=True)
 class _DirectionTerm:
     """One term of the directional loss: r_D of the direction ``end - start`` (or the path
-    ``window``) at ``position`` (None: the variant's default), scored by ``variant``."""
+    ``window``, or the straight path from ``start`` to ``end`` with ``straight_path``) at
+    ``position`` (None: the variant's default), scored by ``variant``."""
 
     variant: str
     end: Tensor
@@ -272,6 +274,7 @@ class _DirectionTerm:
     initial: Tensor
     position: Tensor | None
     window: Tensor | None
+    straight_path: bool = False
 
     @classmethod
     def observed(cls, states: TensorDictBase, variant: str,

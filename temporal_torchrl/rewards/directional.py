@@ -14,7 +14,8 @@ Beyond the thesis (section 6.3 proposal), :func:`d_sequence` reads the window of
 embeddings s_{t-K+1} .. s_t (``window``) instead of one direction: the sequence of its K - 1 steps,
 each at the position, through a small sequence encoder. Its counterparts of the directional loss's
 directions are whole paths: :func:`straight_window` towards the goal, the window reversed for the
-opposite direction.
+opposite direction. Called with ``window=None`` it scores the straight path from ``s_prev`` to
+``s`` without building it (see :func:`d_sequence`).
 
 Zero directions: at the start of an episode s_{t-k} = s_0 = s_t, so Δs_t = 0. Every normalisation
 divides by max(||x||, eps) (:data:`~temporal_torchrl.rewards.positional.EPS`), which maps the zero
@@ -153,8 +154,9 @@ def straight_window(start: Tensor, end: Tensor, length: int) -> Tensor:
     return start.unsqueeze(-2) + fractions.unsqueeze(-1) * (end - start).unsqueeze(-2)
 
 
-def d_sequence(heads: RewardHeads, s: Tensor, *, window: Tensor | None = None, g: Tensor,
-               b: Tensor, position: Tensor | None = None, **unused) -> Tensor:
+def d_sequence(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None,
+               window: Tensor | None = None, g: Tensor, b: Tensor,
+               position: Tensor | None = None, **unused) -> Tensor:
     """d_sequence, the short-horizon sequence directional reward (beyond the thesis, section
     6.3 proposal):
     r(s_t, W_t) = csim(f^D_{W_I}(x_1 .. x_{K-1}), f^D_{W_L}(g - b)),
@@ -165,11 +167,24 @@ def d_sequence(heads: RewardHeads, s: Tensor, *, window: Tensor | None = None, g
 
     With K = 2 the single token n(s_t) ⊕ n(s_t - s_{t-1}) is D3's image input with k = 1, so
     d_sequence is D3 whose one k-step direction is replaced by the ordered sequence of steps.
-    ``s`` and ``s_prev`` are not read: the window carries the direction.
+    ``s`` and ``s_prev`` are not read when a window is given: the window carries the direction.
+
+    ``window=None`` scores the straight path from ``s_prev`` to ``s``, the window
+    ``straight_window(s_prev, s, K)`` whose every step is along s - s_prev (the directional
+    loss's path towards the goal), without building it: its K - 1 tokens are one token
+    n(p) ⊕ n(s - s_prev), which the sequence encoder embeds once. The position p defaults to
+    ``s``, that window's newest entry.
     """
-    window = _required(window, "window", "d_sequence")
+    if window is None:
+        s_prev = _required(s_prev, "window (or s_prev, for the straight path)", "d_sequence")
+        position = s if position is None else position
+        step = unit(s - s_prev).unsqueeze(-2)
+        steps = step.expand(*step.shape[:-2], heads.image.length, step.shape[-1])
+        context = unit(position)
+    else:
+        context, steps = _window_parts(window, position)
     # heads.image(window_tokens(window, position)), with n(s_t) embedded once per window
-    image = heads.image.forward_with_context(*_window_parts(window, position))
+    image = heads.image.forward_with_context(context, steps)
     return cosine_similarity(image, heads.text(g - b))
 
 

@@ -79,6 +79,8 @@ class SequenceEncoder(nn.Module):
         The same function, cheaper: W_e splits into the columns that read the context and
         those that read the token, so the context's share of the token embedding is computed
         once per sequence instead of once per token, and the tokens are never concatenated.
+        Tokens broadcast over the sequence (stride 0 along L, as ``expand`` makes them: the
+        straight path of :func:`~temporal_torchrl.rewards.d_sequence`) are embedded once too.
         """
         context_dim = context.shape[-1]
         if tokens.shape[-2] != self.length or context_dim + tokens.shape[-1] != self.token_dim:
@@ -88,9 +90,11 @@ class SequenceEncoder(nn.Module):
                              "embeddings).")
         context_weight, token_weight = self.embed.weight.split(
             [context_dim, self.token_dim - context_dim], dim=-1)
+        if tokens.stride(-2) == 0:
+            tokens = tokens[..., :1, :]
         hidden = (F.linear(tokens, token_weight, self.embed.bias)
                   + F.linear(context, context_weight).unsqueeze(-2))
-        return self._encode(hidden)
+        return self._encode(hidden.expand(*hidden.shape[:-2], self.length, hidden.shape[-1]))
 
     def _encode(self, hidden: Tensor) -> Tensor:
         """Embedded tokens ``[..., L, width]`` -> ``[..., out_dim]``."""

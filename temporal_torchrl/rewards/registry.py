@@ -77,7 +77,11 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
       :func:`~temporal_torchrl.rewards.goal_baseline_regularise`).
     - ``window``: the last K embeddings s_{t-K+1} .. s_t ``[..., K, D]`` (oldest first, padded
       with s_0 at the episode start), given to rewards registered with
-      ``image_input="window"``, None for the others.
+      ``image_input="window"``, None for the others. A window reward also gets None when the
+      straight path from ``s_prev`` to ``s`` is scored (the directional loss's path towards the
+      goal, ``TemporalReward.directional_reward(..., straight_path=True)``): it reads that path
+      as ``straight_window(s_prev, s, K)``, or scores it without building it, as d_sequence
+      does.
     - ``**unused``: callers pass every keyword above; a reward ignores those it does not need.
     - Returns the reward, shape ``s.shape[:-1]`` (differentiable in the heads' parameters for
       the finetuning losses).

@@ -205,10 +205,16 @@ class TemporalReward(nn.Module):
     def directional_reward(self, embedding: Tensor, previous_embedding: Tensor,
                            initial_embedding: Tensor | None = None,
                            position: Tensor | None = None, variant: str | None = None,
-                           window: Tensor | None = None) -> Tensor:
+                           window: Tensor | None = None, straight_path: bool = False) -> Tensor:
         """r^VLM_D of the direction ``embedding - previous_embedding`` at ``position``
         (default ``embedding``), shape ``embedding.shape[:-1]``; a ``"window"`` reward
         (d_sequence) reads the path ``window`` ``[..., K, D]`` instead (required for it).
+
+        ``straight_path=True`` scores the straight path from ``previous_embedding`` to
+        ``embedding`` instead of a window: for a window reward the path
+        :func:`~temporal_torchrl.rewards.straight_window` would build, which its function
+        receives as ``window=None`` (the directional loss's direction towards the goal); other
+        rewards score one direction, which is that path already.
 
         ``variant`` scores with another registered directional function on this reward's
         directional heads (the release's contrast terms of the directional loss); default the
@@ -218,7 +224,11 @@ class TemporalReward(nn.Module):
         self._check_embedding("previous_embedding", previous_embedding)
         if self.directional is None:
             raise ValueError("This TemporalReward has no directional part (directional=None).")
-        self._check_window(window)
+        if straight_path and window is not None:
+            raise ValueError("straight_path=True scores the straight path from "
+                             "previous_embedding to embedding; pass window=None with it.")
+        if not straight_path:
+            self._check_window(window)
         return DIRECTIONAL[variant or self.directional](
             self.directional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha,
