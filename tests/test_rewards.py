@@ -572,6 +572,25 @@ def test_sequence_encoder_embeds_broadcast_tokens_once():
     torch.testing.assert_close(fast_grad, slow_grad, rtol=1e-5, atol=1e-6)
 
 
+def test_sequence_encoder_layer_written_out_is_torchs_layer():
+    """SequenceEncoder runs its nn.TransformerEncoderLayer's function on the layer's own
+    parameters, without nn.MultiheadAttention: the same outputs and parameter gradients as the
+    torch module, with and without gradients."""
+    torch.manual_seed(5)
+    encoder = SequenceEncoder(token_dim=6, length=5, hidden_dim=16, out_dim=4, width=8,
+                              heads=2)
+    x = torch.randn(9, 5, 8)
+    mine, torchs = encoder._encoder_layer(x), encoder.layer(x)
+    torch.testing.assert_close(mine, torchs, rtol=1e-5, atol=1e-6)
+    parameters = list(encoder.layer.parameters())
+    for a, b in zip(torch.autograd.grad(mine.square().sum(), parameters),
+                    torch.autograd.grad(torchs.square().sum(), parameters), strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6)
+    with torch.no_grad():
+        torch.testing.assert_close(encoder._encoder_layer(x), encoder.layer(x), rtol=1e-5,
+                                   atol=1e-6)
+
+
 def test_d_sequence_reads_the_order_of_the_steps(embeddings):
     s, s0, s_prev, _, g, b = embeddings
     heads = make_heads("d_sequence")

@@ -31,6 +31,7 @@ from torch import Tensor
 from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.positional import (
     _required,
+    clamped_norm,
     cosine_similarity,
     goal_baseline_regularise,
     unit,
@@ -131,11 +132,15 @@ def window_tokens(window: Tensor, position: Tensor | None = None) -> Tensor:
 def _window_parts(window: Tensor, position: Tensor | None) -> tuple[Tensor, Tensor]:
     """The two parts of :func:`window_tokens`: n(p) ``[..., D]`` (p defaults to the window's
     newest entry) and the steps n(w_j - w_{j-1}) ``[..., K - 1, D]``."""
+    _check_window_shape(window)
+    position = window[..., -1, :] if position is None else position
+    return unit(position), unit(window[..., 1:, :] - window[..., :-1, :])
+
+
+def _check_window_shape(window: Tensor) -> None:
     if window.ndim < 2 or window.shape[-2] < 2:
         raise ValueError(f"window of shape {tuple(window.shape)}; expected [..., K, D] with "
                          "K >= 2 embeddings (K - 1 steps).")
-    position = window[..., -1, :] if position is None else position
-    return unit(position), unit(window[..., 1:, :] - window[..., :-1, :])
 
 
 def straight_window(start: Tensor, end: Tensor, length: int) -> Tensor:
@@ -178,13 +183,15 @@ def d_sequence(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None,
     if window is None:
         s_prev = _required(s_prev, "window (or s_prev, for the straight path)", "d_sequence")
         position = s if position is None else position
-        step = unit(s - s_prev).unsqueeze(-2)
+        step = (s - s_prev).unsqueeze(-2)
         steps = step.expand(*step.shape[:-2], heads.image.length, step.shape[-1])
-        context = unit(position)
     else:
-        context, steps = _window_parts(window, position)
-    # heads.image(window_tokens(window, position)), with n(s_t) embedded once per window
-    image = heads.image.forward_with_context(context, steps)
+        _check_window_shape(window)
+        position = window[..., -1, :] if position is None else position
+        steps = window[..., 1:, :] - window[..., :-1, :]
+    # heads.image(window_tokens(window, position)): n(s_t) embedded once per window, and each
+    # step's normalisation applied to its embedding (see SequenceEncoder.forward_with_context)
+    image = heads.image.forward_with_context(unit(position), steps, clamped_norm(steps))
     return cosine_similarity(image, heads.text(g - b))
 
 

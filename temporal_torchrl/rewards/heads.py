@@ -72,15 +72,19 @@ class SequenceEncoder(nn.Module):
                              f"{self.length + 1} embeddings).")
         return self._encode(self.embed(tokens))
 
-    def forward_with_context(self, context: Tensor, tokens: Tensor) -> Tensor:
+    def forward_with_context(self, context: Tensor, tokens: Tensor,
+                             token_norms: Tensor | None = None) -> Tensor:
         """:meth:`forward` of the tokens ``context ⊕ tokens_j``, j = 1 .. L, for one
-        ``context [..., C]`` shared by a sequence's ``tokens [..., L, token_dim - C]``.
+        ``context [..., C]`` shared by a sequence's ``tokens [..., L, token_dim - C]``; with
+        ``token_norms [..., L, 1]``, of the tokens ``context ⊕ tokens_j / token_norms_j``.
 
         The same function, cheaper: W_e splits into the columns that read the context and
         those that read the token, so the context's share of the token embedding is computed
         once per sequence instead of once per token, and the tokens are never concatenated.
-        Tokens broadcast over the sequence (stride 0 along L, as ``expand`` makes them: the
-        straight path of :func:`~temporal_torchrl.rewards.d_sequence`) are embedded once too.
+        The division by ``token_norms`` runs on the tokens' embeddings (``width`` wide) instead
+        of on the tokens. Tokens broadcast over the sequence (stride 0 along L, as ``expand``
+        makes them: the straight path of :func:`~temporal_torchrl.rewards.d_sequence`) are
+        embedded once.
         """
         context_dim = context.shape[-1]
         if tokens.shape[-2] != self.length or context_dim + tokens.shape[-1] != self.token_dim:
@@ -92,15 +96,35 @@ class SequenceEncoder(nn.Module):
             [context_dim, self.token_dim - context_dim], dim=-1)
         if tokens.stride(-2) == 0:
             tokens = tokens[..., :1, :]
-        hidden = (F.linear(tokens, token_weight, self.embed.bias)
-                  + F.linear(context, context_weight).unsqueeze(-2))
+            token_norms = None if token_norms is None else token_norms[..., :1, :]
+        embedded = F.linear(tokens, token_weight)
+        if token_norms is not None:
+            embedded = embedded / token_norms
+        hidden = embedded + self.embed.bias + F.linear(context, context_weight).unsqueeze(-2)
         return self._encode(hidden.expand(*hidden.shape[:-2], self.length, hidden.shape[-1]))
 
     def _encode(self, hidden: Tensor) -> Tensor:
         """Embedded tokens ``[..., L, width]`` -> ``[..., out_dim]``."""
         batch, width = hidden.shape[:-2], hidden.shape[-1]
         hidden = hidden.reshape(-1, self.length, width) + self.position_embedding
-        return self.output(self.layer(hidden).mean(-2)).reshape(*batch, -1)
+        return self.output(self._encoder_layer(hidden).mean(-2)).reshape(*batch, -1)
+
+    def _encoder_layer(self, x: Tensor) -> Tensor:
+        """``self.layer(x)`` (pre-norm, ReLU, no dropout), written out on its parameters.
+
+        The same function, cheaper: ``nn.MultiheadAttention`` runs SDPA's CPU flash kernel,
+        which on sequences this short costs more than the attention's own products.
+        """
+        layer, attention = self.layer, self.layer.self_attn
+        rows, length, width = x.shape
+        heads = attention.num_heads
+        h = layer.norm1(x)
+        q, k, v = (F.linear(h, attention.in_proj_weight, attention.in_proj_bias)
+                   .view(rows, length, 3, heads, width // heads).permute(2, 0, 3, 1, 4))
+        weights = torch.softmax(q @ k.transpose(-1, -2) * (width // heads) ** -0.5, dim=-1)
+        attended = (weights @ v).transpose(1, 2).reshape(rows, length, width)
+        x = x + attention.out_proj(attended)
+        return x + layer.linear2(F.relu(layer.linear1(layer.norm2(x))))
 
     def extra_repr(self) -> str:
         return f"token_dim={self.token_dim}, length={self.length}"

@@ -46,9 +46,14 @@ EPS = 1e-8
 PROJECTIONS = ("origin", "line")
 
 
+def clamped_norm(x: Tensor) -> Tensor:
+    """max(||x||_2, EPS) along the last dimension, kept: the divisor of :func:`unit`."""
+    return x.norm(dim=-1, keepdim=True).clamp_min(EPS)
+
+
 def unit(x: Tensor) -> Tensor:
     """x / max(||x||_2, EPS) along the last dimension (zero vectors stay zero)."""
-    return x / x.norm(dim=-1, keepdim=True).clamp_min(EPS)
+    return x / clamped_norm(x)
 
 
 def cosine_similarity(x: Tensor, y: Tensor) -> Tensor:
