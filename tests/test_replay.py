@@ -82,6 +82,20 @@ def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
         (200.0, 200.0, 200.0, 201.0), (200.0, 200.0, 201.0, 202.0),
         (200.0, 201.0, 202.0, 203.0)}
     assert torch.equal(negatives["embedding_window"][:, -1], negatives["embedding"])
+    # Stage 2: the labelled states carry their windows; the pair's states, which only the
+    # positional ranking loss reads, carry none (their windows are never converted).
+    staged = EpisodeReplayBuffer(capacity=60, history=2, window_length=length, gap=3)
+    insert(staged, 0, 10)
+    insert(staged, 1, 20, successes=(12, 13))
+    batch = staged.finetuning.sample(64)
+    for name in ("negative", "positive"):
+        states = batch[name]
+        assert torch.equal(marker(states["embedding_window"]), 100.0 * states["episode"].unsqueeze(
+            -1) + torch.clamp(states["step"].unsqueeze(-1) - torch.arange(length - 1, -1, -1),
+                              min=0))
+    for state in ("later", "earlier"):
+        assert "embedding_window" not in batch["positive_pair", state].keys()
+        assert "embedding" in batch["positive_pair", state].keys()
     plain = EpisodeReplayBuffer(capacity=24, history=2)
     insert(plain, 0, 5)
     assert "embedding_window" not in plain.sample(4)["next"].keys()

@@ -71,8 +71,9 @@ class FinetuningLayout(Transform):
     :meth:`FinetuningSampler.groups`: the same answer as when it sampled, both read from the
     writer). Each state has ``embedding`` (s_t), ``initial_embedding`` (s_0),
     ``previous_embedding`` (s_{t-k}, clamped to s_0), with ``window_length`` ``embedding_window``
-    (s_{t-K+1} .. s_t, padded with s_0), ``label``, ``step`` and ``episode``; the batch on
-    ``device`` (None: the storage's).
+    (s_{t-K+1} .. s_t, padded with s_0; not for the pair's states, which only the positional
+    ranking loss reads), ``label``, ``step`` and ``episode``; the batch on ``device`` (None: the
+    storage's).
     """
 
     def __init__(self, groups: Callable[[], tuple[str, ...]],
@@ -83,26 +84,29 @@ class FinetuningLayout(Transform):
         self.window_length = window_length
         self.device = torch.device(device) if device is not None else None
 
-    def _states(self, rows: TensorDictBase, embeddings: torch.Tensor) -> TensorDict:
+    def _states(self, rows: TensorDictBase, embeddings: torch.Tensor,
+                window: bool) -> TensorDict:
         states = {"embedding": embeddings[:, 0], "initial_embedding": embeddings[:, 1],
                   "previous_embedding": embeddings[:, 2], "label": rows["label"][:, 0],
                   "step": rows["step"][:, 0].long(), "episode": rows["episode"][:, 0]}
-        if self.window_length:
-            states["embedding_window"] = embeddings[:, 3:]
+        if self.window_length and window:
+            states["embedding_window"] = _embeddings(rows, slice(3, None))
         return TensorDict(states, rows.shape[:1], device=rows.device)
 
     def forward(self, rows: TensorDictBase) -> TensorDictBase:
         batch = TensorDict({}, rows.shape[1:2], device=rows.device)
-        embeddings = _embeddings(rows, slice(None))  # one conversion for every group
+        # One conversion for every group's states, so the losses join groups as views; the
+        # windows (K rows a state) are converted only where a loss reads them.
+        embeddings = _embeddings(rows, slice(0, 3))
         group = iter(range(rows.shape[0]))
 
-        def states() -> TensorDict:
+        def states(window: bool = True) -> TensorDict:
             index = next(group)
-            return self._states(rows[index], embeddings[index])
+            return self._states(rows[index], embeddings[index], window)
 
         for name in self.groups():
             if name == "positive_pair":
-                batch[name] = TensorDict({"later": states(), "earlier": states()},
+                batch[name] = TensorDict({"later": states(False), "earlier": states(False)},
                                          rows.shape[1:2])
             else:
                 batch[name] = states()
