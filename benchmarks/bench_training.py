@@ -22,8 +22,10 @@ loop    the whole default loop (the shipped encoder at 64 px, FuRL + D3, stage 1
         ends: the 1st has no updates), against its bound (its env side, measured without
         updates, plus its updates' FLOPs at the GEMM rate), its ceiling (the env side plus its
         updates' matmuls alone) and, with ``--baseline-rev REV``, against that git revision's
-        loop, run from a worktree by this script in a subprocess; d_sequence against D3 in the
-        same loop (state encoder, D = 1024; three rounds each, alternating).
+        loop, run from a worktree by this script in a subprocess.
+sequence  d_sequence (K = 8) against D3: the reward-head update (FuRL + the directional loss,
+        D = 1024) in stage 1 and 2, alternating in one process; the whole loop (state encoder,
+        D = 1024, 1 env, eager) in ``--rounds`` alternating runs of each (default 3).
 grid    the whole recipe for the state encoder (D = 1024), the shipped encoder and a
         random-weight LIV at 224 px; ``env.num_envs`` 1, 2 and 4, eager and compiled; against
         the loop of one env, eager, of the same encoder; with CUDA also LIV with 16 envs,
@@ -84,7 +86,7 @@ from temporal_torchrl.envs import make_env  # noqa: E402
 from temporal_torchrl.objectives import ranking_loss  # noqa: E402
 from temporal_torchrl.training import factories  # noqa: E402
 
-SECTIONS = ("sac", "heads", "step", "loop", "grid", "reference", "replay")
+SECTIONS = ("sac", "heads", "step", "loop", "sequence", "grid", "reference", "replay")
 RUN_IDS = itertools.count()  # a fresh output_dir per recipe run
 OBSERVATION_DIM, ACTION_DIM = 39, 4  # Metaworld's state and action
 
@@ -650,6 +652,30 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     return rows
 
 
+def sequence_head_rows(tmp: Path, quick: bool, rounds: int = 5) -> list[dict]:
+    """The reward-head update with d_sequence (K = 8) against D3, FuRL beside each, D = 1024,
+    stage 1 and 2: ``rounds`` alternating timings of the two in one process, the medians."""
+    rows = []
+    for stage in (1, 2):
+        updates = {variant: training_setup(tmp, 1024, f"reward.directional={variant}",
+                                           stage=stage)["trainer"].update
+                   for variant in ("d3", "d_sequence")}
+        times = {variant: [] for variant in updates}
+        for _ in range(2 if quick else rounds):
+            for variant, update in updates.items():
+                times[variant].append(seconds_per_call(update, min_seconds=0.3 if quick else 1.0,
+                                                       warmup_calls=3) * 1e3)
+        d3, sequence = (statistics.median(times[variant]) for variant in updates)
+        print(f"head update, stage {stage}: d_sequence {sequence:.1f} ms, D3 {d3:.1f} ms",
+              flush=True)
+        rows.append({"measure": f"reward-head update, FuRL + d_sequence K=8, stage {stage}, "
+                                f"D=1024, eager, median of {len(times['d3'])} alternating (ms)",
+                     "project": sequence, "reference": d3,
+                     "reference is": "FuRL + D3, the same batch size and buffer",
+                     "ratio": sequence / d3})
+    return rows
+
+
 def sequence_rows(tmp: Path, quick: bool, rounds: int = 3) -> list[dict]:
     """d_sequence (K = 8) against D3 in the same loop: state encoder D = 1024, 1 env, eager;
     ``rounds`` runs of each, alternating, and the medians."""
@@ -773,12 +799,18 @@ def main() -> None:
                              "the mode that pays off on a CPU)")
     parser.add_argument("--repeats", type=int, default=5,
                         help="fresh eager and compiled builds of the step section (default 5)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="alternating loop runs of d_sequence and D3 in the sequence "
+                             "section (default 3)")
     parser.add_argument("--baseline-rev", default=None,
                         help="git revision whose default loop the loop section measures too")
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error(f"--repeats {args.repeats}: expected an integer >= 1 (fresh builds of "
                      "the step section).")
+    if args.rounds < 1:
+        parser.error(f"--rounds {args.rounds}: expected an integer >= 1 (loop runs of each "
+                     "reward in the sequence section).")
     sections = args.sections.split(",")
     if unknown := set(sections) - {*SECTIONS, "default"}:
         parser.error(f"unknown sections {sorted(unknown)}; choose from {', '.join(SECTIONS)}")
@@ -800,7 +832,9 @@ def main() -> None:
             rows += default_loop_rows(tmp, args.quick)
         if "loop" in sections:
             rows += baseline_rows(tmp, args.quick, args.baseline_rev, peak)
-            rows += sequence_rows(tmp, args.quick)
+        if "sequence" in sections:
+            rows += sequence_head_rows(tmp, args.quick)
+            rows += sequence_rows(tmp, args.quick, args.rounds)
         if "grid" in sections:
             rows += loop_rows(tmp, args.quick, args.skip_liv, args.compile_mode)
         if "reference" in sections:
