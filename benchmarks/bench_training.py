@@ -24,8 +24,9 @@ loop    the whole default loop (the shipped encoder at 64 px, FuRL + D3, stage 1
         updates' matmuls alone) and, with ``--baseline-rev REV``, against that git revision's
         loop, run from a worktree by this script in a subprocess.
 sequence  d_sequence (K = 8) against D3: the reward-head update (FuRL + the directional loss,
-        D = 1024) in stage 1 and 2, alternating in one process; the whole loop (state encoder,
-        D = 1024, 1 env, eager) in ``--rounds`` alternating runs of each (default 3).
+        D = 1024) and the training step in stage 1 and 2, alternating in one process; the whole
+        loop (state encoder, D = 1024, 1 env, eager) in ``--rounds`` alternating runs of each
+        (default 3).
 grid    the whole recipe for the state encoder (D = 1024), the shipped encoder and a
         random-weight LIV at 224 px; ``env.num_envs`` 1, 2 and 4, eager and compiled; against
         the loop of one env, eager, of the same encoder; with CUDA also LIV with 16 envs,
@@ -653,26 +654,36 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
 
 
 def sequence_head_rows(tmp: Path, quick: bool, rounds: int = 5) -> list[dict]:
-    """The reward-head update with d_sequence (K = 8) against D3, FuRL beside each, D = 1024,
-    stage 1 and 2: ``rounds`` alternating timings of the two in one process, the medians."""
+    """The reward-head update and the training step (head update, SAC batch and relabelling,
+    SAC update) with d_sequence (K = 8) against D3, FuRL beside each, D = 1024, stage 1 and 2:
+    ``rounds`` alternating timings of the two in one process, the medians."""
     rows = []
     for stage in (1, 2):
-        updates = {variant: training_setup(tmp, 1024, f"reward.directional={variant}",
-                                           stage=stage)["trainer"].update
-                   for variant in ("d3", "d_sequence")}
-        times = {variant: [] for variant in updates}
-        for _ in range(2 if quick else rounds):
-            for variant, update in updates.items():
-                times[variant].append(seconds_per_call(update, min_seconds=0.3 if quick else 1.0,
-                                                       warmup_calls=3) * 1e3)
-        d3, sequence = (statistics.median(times[variant]) for variant in updates)
-        print(f"head update, stage {stage}: d_sequence {sequence:.1f} ms, D3 {d3:.1f} ms",
-              flush=True)
-        rows.append({"measure": f"reward-head update, FuRL + d_sequence K=8, stage {stage}, "
-                                f"D=1024, eager, median of {len(times['d3'])} alternating (ms)",
-                     "project": sequence, "reference": d3,
-                     "reference is": "FuRL + D3, the same batch size and buffer",
-                     "ratio": sequence / d3})
+        setups = {variant: training_setup(tmp, 1024, f"reward.directional={variant}",
+                                          stage=stage) for variant in ("d3", "d_sequence")}
+
+        def step(setup: dict):
+            def run() -> None:
+                setup["trainer"].update()
+                setup["update_sac"](setup["buffer"].sample())
+            return run
+
+        for part, make in (("reward-head update", lambda setup: setup["trainer"].update),
+                           ("training step", step)):
+            calls = {variant: make(setup) for variant, setup in setups.items()}
+            times = {variant: [] for variant in calls}
+            for _ in range(2 if quick else rounds):
+                for variant, call in calls.items():
+                    times[variant].append(seconds_per_call(
+                        call, min_seconds=0.3 if quick else 1.0, warmup_calls=3) * 1e3)
+            d3, sequence = (statistics.median(times[variant]) for variant in calls)
+            print(f"{part}, stage {stage}: d_sequence {sequence:.1f} ms, D3 {d3:.1f} ms",
+                  flush=True)
+            rows.append({"measure": f"{part}, FuRL + d_sequence K=8, stage {stage}, D=1024, "
+                                    f"eager, median of {len(times['d3'])} alternating (ms)",
+                         "project": sequence, "reference": d3,
+                         "reference is": "FuRL + D3, the same batch size and buffer",
+                         "ratio": sequence / d3})
     return rows
 
 

@@ -83,7 +83,7 @@ class SequenceEncoder(nn.Module):
         once per sequence instead of once per token, and the tokens are never concatenated.
         The division by ``token_norms`` runs on the tokens' embeddings (``width`` wide) instead
         of on the tokens. Tokens broadcast over the sequence (stride 0 along L, as ``expand``
-        makes them: the straight path of :func:`~temporal_torchrl.rewards.d_sequence`) are
+        makes them: the straight path of :func:`~temporal_torchrl.rewards.directional.d_sequence`) are
         embedded once.
         """
         context_dim = context.shape[-1]
