@@ -511,6 +511,12 @@ def test_d_sequence_with_two_embeddings_reads_d3_inputs():
                                d3_input(s_t, s_prev - s_t))
 
 
+def sequence_reward_by_definition(heads, window, position, g, b):
+    """r = csim(f_I(x_1 .. x_(K-1)), f_L(g - b)) on the concatenated tokens of window_tokens."""
+    return F.cosine_similarity(heads.image(window_tokens(window, position)),
+                               heads.text(g - b).expand(window.shape[0], -1), dim=-1)
+
+
 def test_d_sequence_is_csim_of_the_sequence_encoder_over_its_tokens(embeddings):
     """d_sequence embeds n(s_t) once per window (SequenceEncoder.forward_with_context): the
     same reward as the encoder run on the concatenated tokens of window_tokens, written out as
@@ -519,11 +525,9 @@ def test_d_sequence_is_csim_of_the_sequence_encoder_over_its_tokens(embeddings):
     heads = make_heads("d_sequence")
     window = path(s, s_prev)
     for position in (None, s_prev):
-        expected = F.cosine_similarity(heads.image(window_tokens(window, position)),
-                                       heads.text(g - b).expand(BATCH, -1), dim=-1)
         torch.testing.assert_close(
             DIRECTIONAL["d_sequence"](heads, s, window=window, g=g, b=b, position=position),
-            expected, rtol=1e-5, atol=1e-6)
+            sequence_reward_by_definition(heads, window, position, g, b), rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match="a context of size 3"):
         heads.image.forward_with_context(torch.zeros(BATCH, 3), window_tokens(window))
 
@@ -536,11 +540,10 @@ def test_d_sequence_of_the_straight_path_without_its_window(embeddings):
     heads = make_heads("d_sequence")
     straight = straight_window(s_prev, s, WINDOW)
     for position in (s_prev, None):
-        expected = F.cosine_similarity(heads.image(window_tokens(straight, position)),
-                                       heads.text(g - b).expand(BATCH, -1), dim=-1)
         torch.testing.assert_close(
             DIRECTIONAL["d_sequence"](heads, s, s_prev=s_prev, g=g, b=b, position=position),
-            expected, rtol=1e-5, atol=1e-6)
+            sequence_reward_by_definition(heads, straight, position, g, b), rtol=1e-5,
+            atol=1e-6)
     reward = _temporal(positional=None, directional="d_sequence", window_length=WINDOW)
     expected = DIRECTIONAL["d_sequence"](
         reward.directional_heads, s, window=straight_window(s_prev, s, WINDOW), position=s_prev,
@@ -570,6 +573,14 @@ def test_sequence_encoder_embeds_broadcast_tokens_once():
     (slow_grad,) = torch.autograd.grad(slow.sum(), token)
     torch.testing.assert_close(fast, slow, rtol=1e-5, atol=1e-6)
     torch.testing.assert_close(fast_grad, slow_grad, rtol=1e-5, atol=1e-6)
+    # Norms that differ per token keep every token apart, broadcast tokens or not.
+    norms = torch.rand(7, 5, 1) + 0.5
+    torch.testing.assert_close(
+        encoder.forward_with_context(context, expanded, norms),
+        encoder(torch.cat([context.unsqueeze(-2).expand(7, 5, 2), expanded / norms], -1)),
+        rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match=r"token_norms of shape \(7, 5\); expected"):
+        encoder.forward_with_context(context, expanded, norms.squeeze(-1))
 
 
 def test_sequence_encoder_layer_written_out_is_torchs_layer():

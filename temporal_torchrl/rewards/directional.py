@@ -124,23 +124,20 @@ def window_tokens(window: Tensor, position: Tensor | None = None) -> Tensor:
     each step of the window as D3's image input, read at one position. Zero steps (the padding
     with s_0 at an episode start) stay zero after :func:`unit`.
     """
-    position_part, steps = _window_parts(window, position)
-    position_part, steps = torch.broadcast_tensors(position_part.unsqueeze(-2), steps)
+    position, steps = _window_steps(window, position)
+    position_part, steps = torch.broadcast_tensors(unit(position).unsqueeze(-2), unit(steps))
     return torch.cat((position_part, steps), dim=-1)
 
 
-def _window_parts(window: Tensor, position: Tensor | None) -> tuple[Tensor, Tensor]:
-    """The two parts of :func:`window_tokens`: n(p) ``[..., D]`` (p defaults to the window's
-    newest entry) and the steps n(w_j - w_{j-1}) ``[..., K - 1, D]``."""
-    _check_window_shape(window)
-    position = window[..., -1, :] if position is None else position
-    return unit(position), unit(window[..., 1:, :] - window[..., :-1, :])
-
-
-def _check_window_shape(window: Tensor) -> None:
+def _window_steps(window: Tensor, position: Tensor | None) -> tuple[Tensor, Tensor]:
+    """The position p ``[..., D]`` (default the window's newest entry) and the steps
+    w_j - w_{j-1} ``[..., K - 1, D]`` of a window, before :func:`window_tokens` normalises
+    them."""
     if window.ndim < 2 or window.shape[-2] < 2:
         raise ValueError(f"window of shape {tuple(window.shape)}; expected [..., K, D] with "
                          "K >= 2 embeddings (K - 1 steps).")
+    position = window[..., -1, :] if position is None else position
+    return position, window[..., 1:, :] - window[..., :-1, :]
 
 
 def straight_window(start: Tensor, end: Tensor, length: int) -> Tensor:
@@ -184,14 +181,15 @@ def d_sequence(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None,
         s_prev = _required(s_prev, "window (or s_prev, for the straight path)", "d_sequence")
         position = s if position is None else position
         step = (s - s_prev).unsqueeze(-2)
-        steps = step.expand(*step.shape[:-2], heads.image.length, step.shape[-1])
+        # One step's norm, broadcast with it: the encoder embeds the step once (stride 0).
+        steps, norms = (x.expand(*x.shape[:-2], heads.image.length, x.shape[-1])
+                        for x in (step, clamped_norm(step)))
     else:
-        _check_window_shape(window)
-        position = window[..., -1, :] if position is None else position
-        steps = window[..., 1:, :] - window[..., :-1, :]
+        position, steps = _window_steps(window, position)
+        norms = clamped_norm(steps)
     # heads.image(window_tokens(window, position)): n(s_t) embedded once per window, and each
     # step's normalisation applied to its embedding (see SequenceEncoder.forward_with_context)
-    image = heads.image.forward_with_context(unit(position), steps, clamped_norm(steps))
+    image = heads.image.forward_with_context(unit(position), steps, norms)
     return cosine_similarity(image, heads.text(g - b))
 
 

@@ -83,8 +83,8 @@ class SequenceEncoder(nn.Module):
         once per sequence instead of once per token, and the tokens are never concatenated.
         The division by ``token_norms`` runs on the tokens' embeddings (``width`` wide) instead
         of on the tokens. Tokens broadcast over the sequence (stride 0 along L, as ``expand``
-        makes them: the straight path of :func:`~temporal_torchrl.rewards.directional.d_sequence`) are
-        embedded once.
+        makes them, with their norms broadcast too: the straight path of
+        :func:`~temporal_torchrl.rewards.directional.d_sequence`) are embedded once.
         """
         context_dim = context.shape[-1]
         if tokens.shape[-2] != self.length or context_dim + tokens.shape[-1] != self.token_dim:
@@ -92,9 +92,13 @@ class SequenceEncoder(nn.Module):
                              f"shape {tuple(tokens.shape)}; expected [..., {self.length}, "
                              f"{self.token_dim}] together (a window of {self.length + 1} "
                              "embeddings).")
+        if token_norms is not None and token_norms.shape[-2:] != (self.length, 1):
+            raise ValueError(f"SequenceEncoder: token_norms of shape {tuple(token_norms.shape)}; "
+                             f"expected [..., {self.length}, 1] (one norm per token, as "
+                             "x.norm(dim=-1, keepdim=True) gives).")
         context_weight, token_weight = self.embed.weight.split(
             [context_dim, self.token_dim - context_dim], dim=-1)
-        if tokens.stride(-2) == 0:
+        if tokens.stride(-2) == 0 and (token_norms is None or token_norms.stride(-2) == 0):
             tokens = tokens[..., :1, :]
             token_norms = None if token_norms is None else token_norms[..., :1, :]
         embedded = F.linear(tokens, token_weight)
