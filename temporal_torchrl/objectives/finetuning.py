@@ -35,6 +35,7 @@ from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 from torchrl.objectives import LossModule
 
+from temporal_torchrl.modules import relu
 from temporal_torchrl.rewards import (
     DIRECTIONAL,
     TemporalReward,
@@ -49,7 +50,7 @@ HEADS_LEARNING_RATE = 1e-4
 
 def ranking_loss(preferred: Tensor, other: Tensor, delta: float) -> Tensor:
     """FuRL's ranking loss l_delta(s_p, s_n) = max(0, r(s_n) - r(s_p) + delta) (thesis 3.1.3)."""
-    return torch.relu(other - preferred + delta)
+    return relu(other - preferred + delta)
 
 
 class PositionalRankingLoss(LossModule):

@@ -22,6 +22,8 @@ from torchrl.modules import ProbabilisticActor
 from torchrl.modules.distributions.utils import rsample_and_log_prob
 from torchrl.objectives import LossModule
 
+from temporal_torchrl.modules import relu
+
 
 class StackedQValueNetwork(nn.Module):
     """``num_critics`` MLP Q-networks Q_i(s, a) = MLP_i([s, a]), ReLU between layers, their
@@ -75,7 +77,7 @@ class StackedQValueNetwork(nn.Module):
             # The first layer's input is shared: broadcast it rather than copy it per critic.
             features = torch.baddbmm(bias, features.expand(self.num_critics, -1, -1), weight)
             if layer < last:
-                features = torch.relu(features)
+                features = relu(features)
         return features.reshape(self.num_critics, *batch_shape)
 
 

@@ -12,12 +12,13 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from temporal_torchrl.modules import ReLU, relu
 from temporal_torchrl.rewards.registry import IMAGE_INPUTS, image_input_of
 
 
 def _mlp(in_dim: int, hidden_dim: int, out_dim: int) -> nn.Sequential:
     # No final activation or normalisation layer: the rewards normalise the outputs themselves.
-    return nn.Sequential(nn.Linear(in_dim, hidden_dim), nn.ReLU(), nn.Linear(hidden_dim, out_dim))
+    return nn.Sequential(nn.Linear(in_dim, hidden_dim), ReLU(), nn.Linear(hidden_dim, out_dim))
 
 
 class SequenceEncoder(nn.Module):
@@ -128,7 +129,7 @@ class SequenceEncoder(nn.Module):
         weights = torch.softmax(q @ k.transpose(-1, -2) * (width // heads) ** -0.5, dim=-1)
         attended = (weights @ v).transpose(1, 2).reshape(rows, length, width)
         x = x + attention.out_proj(attended)
-        return x + layer.linear2(F.relu(layer.linear1(layer.norm2(x))))
+        return x + layer.linear2(relu(layer.linear1(layer.norm2(x))))
 
     def extra_repr(self) -> str:
         return f"token_dim={self.token_dim}, length={self.length}"

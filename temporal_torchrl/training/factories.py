@@ -37,6 +37,7 @@ from temporal_torchrl.envs import (
     make_temporal_env,
     make_temporal_reward,
 )
+from temporal_torchrl.modules import ReLU
 from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.runs import RunDirectory, check_positives_source, reward_options
@@ -229,7 +230,7 @@ def make_sac_agent(cfg: DictConfig,
     action_dim = action_spec.shape[-1]
     actor_net = nn.Sequential(
         MLP(num_cells=list(cfg.sac.hidden_sizes), out_features=2 * action_dim,
-            activation_class=nn.ReLU),
+            activation_class=ReLU),
         NormalParamExtractor(scale_mapping="biased_softplus_1.0", scale_lb=1e-4))
     actor = ProbabilisticActor(
         TensorDictModule(actor_net, in_keys=["observation"], out_keys=["loc", "scale"]),
@@ -260,11 +261,19 @@ def make_sac_loss(cfg: DictConfig, actor: ProbabilisticActor, critics: StackedQV
     return loss, optimizer
 
 
+def compile_options(mode: str | None) -> dict:
+    """``torch.compile`` options for ``compile.mode`` (its mode's inductor options), with random
+    numbers drawn by ATen's generator (``fallback_random``): the compiled SAC update and policy
+    take the draws the eager ones take, so a seeded run's episodes do not depend on
+    ``compile.enabled`` beyond float rounding."""
+    return {**torch._inductor.list_mode_options(mode or "default"), "fallback_random": True}
+
+
 def make_sac_update(cfg: DictConfig, loss: StackedCriticSACLoss,
                     optimizer: torch.optim.Optimizer) -> Callable[[TensorDict], TensorDict]:
     """One SAC step on a batch: losses, backward, Adam, target critics' Polyak step; returns the
-    detached losses, alpha and entropy. Compiled (``compile.*``) as in TorchRL's SAC recipe on
-    a GPU; eager on a CPU, where compiling it measured no faster (docs/guides/throughput.md)."""
+    detached losses, alpha and entropy. Compiled with ``compile.enabled`` as in TorchRL's SAC
+    recipe (:func:`compile_options`); ``compile.cudagraphs`` also captures it in a CUDA graph."""
     def update(batch: TensorDict) -> TensorDict:
         loss_td = loss(batch)
         (loss_td["loss_actor"] + loss_td["loss_qvalue"] + loss_td["loss_alpha"]).backward()
@@ -273,8 +282,8 @@ def make_sac_update(cfg: DictConfig, loss: StackedCriticSACLoss,
         loss.update_target_critics()
         return loss_td.detach()
 
-    if cfg.compile.enabled and resolve_device(cfg.train.device).type == "cuda":
-        update = torch.compile(update, mode=cfg.compile.mode)
+    if cfg.compile.enabled:
+        update = torch.compile(update, options=compile_options(cfg.compile.mode))
     if cfg.compile.cudagraphs:
         update = CudaGraphModule(update, in_keys=[], out_keys=[], warmup=5)
     return update
@@ -292,7 +301,8 @@ def make_collector(cfg: DictConfig, env: EnvBase, actor: TensorDictModuleBase,
                      exploration_type=ExplorationType.RANDOM,
                      policy_device=resolve_device(cfg.train.device), env_device=env.device,
                      storing_device=env.device,
-                     compile_policy={"mode": cfg.compile.mode} if cfg.compile.enabled else None,
+                     compile_policy=({"options": compile_options(cfg.compile.mode)}
+                                     if cfg.compile.enabled else None),
                      auto_register_policy_transforms=False)
 
 
