@@ -6,7 +6,8 @@ sac     the SAC update alone (batch 256, (256, 256) networks, fused Adam): the r
         update (``StackedCriticSACLoss``) against its compute bound, against
         TorchRL's ``SACLoss`` as its docs build it (vmap over the critics, the whole replay
         batch) and against a plain-PyTorch twin-critic update; the recipe's update compiled
-        (``torch.compile``: the recipe compiles it on a GPU only) against it eager.
+        (``compile.enabled``) against it eager, and both against the bound in 5 alternating
+        rounds, each with its own GEMM rate.
 heads   the reward-head update alone (FuRL's ranking loss and D3's directional loss, stage 2,
         batch 256, D = 1024 and 256) against its compute bound and against the same two losses
         scored one term at a time with one backward per loss (the trainer before the terms
@@ -15,8 +16,8 @@ step    the training step as the recipe runs it: one reward-head update, one SAC
         and relabelled, one SAC update; stage 2, D = 1024. Eager against the compute bound, and
         compiled (``torch.compile``) against eager in ``--repeats`` fresh builds (min, median,
         max), with the compile time of the first; and compile's ceiling: the eager step with
-        the parts it compiles (the head losses' forward and backward, the relabelling's reward)
-        cut to their matmuls alone.
+        the parts it compiles (the head losses' forward and backward, the relabelling's reward,
+        the SAC update) cut to their matmuls alone.
 loop    the whole default loop (the shipped encoder at 64 px, FuRL + D3, stage 1 with relay, 1
         env, eager), env steps/s in the steady state (the 3rd and 4th episodes, timed at their
         ends: the 1st has no updates), against its bound (its env side, measured without
@@ -220,9 +221,9 @@ def matmul_row(measure: str, seconds: float, matmul_seconds: float) -> dict:
             "ratio": matmul_seconds / seconds}
 
 
-def gemm_flops_per_second(size: int = 2048) -> float:
+def gemm_flops_per_second(size: int = 2048, min_seconds: float = 2.0) -> float:
     a, b = torch.randn(size, size), torch.randn(size, size)
-    seconds = seconds_per_call(lambda: a @ b, min_seconds=2.0)
+    seconds = seconds_per_call(lambda: a @ b, min_seconds=min_seconds)
     return 2 * size ** 3 / seconds
 
 
@@ -325,13 +326,17 @@ def cycling(update, batches: list[TensorDict]):
     return lambda: update(batches[next(calls) % len(batches)])
 
 
-def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict]:
+def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
+             rounds: int = 5) -> list[dict]:
+    """The recipe's SAC update, eager and compiled, against its bound, its matmuls alone,
+    TorchRL's SACLoss and plain PyTorch. Eager, compiled and the GEMM rate are timed in
+    ``rounds`` alternating rounds, so that each round's fraction of the bound divides by the
+    GEMM rate of the same minutes (this VM's load moves both); the medians are shown."""
     minimum = 1.0 if quick else 4.0
     setup = training_setup(tmp, 256)
     batches = [setup["buffer"].sample() for _ in range(8)]
     recipe = cycling(setup["update_sac"], batches)
     flops = counted_flops(recipe)
-    recipe_seconds = seconds_per_call(recipe, min_seconds=minimum, warmup_calls=5)
     matmul_seconds = seconds_per_call(matmuls_alone(recipe), min_seconds=minimum,
                                       warmup_calls=5)
     torchrl_seconds = seconds_per_call(cycling(torchrl_sac_update(setup["cfg"], setup["actor"]),
@@ -340,17 +345,51 @@ def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict
     plain = PlainSAC(setup["cfg"])
     plain_seconds = seconds_per_call(cycling(plain.update, batches), min_seconds=minimum,
                                      warmup_calls=5)
-    # The recipe never compiles its CPU SAC update: this row is why.
-    compiled_update = cycling(torch.compile(training_setup(tmp, 256)["update_sac"], mode=mode),
+    compiled_update = cycling(training_setup(tmp, 256, "compile.enabled=true",
+                                             f"compile.mode={mode or 'null'}")["update_sac"],
                               batches)
     start = time.perf_counter()
     for _ in range(3):
         compiled_update()
     compile_seconds = time.perf_counter() - start
-    compiled_seconds = seconds_per_call(compiled_update, min_seconds=minimum, warmup_calls=5)
-    print(f"sac: {flops / 1e9:.3f} GFLOP; compiled in {compile_seconds:.0f} s", flush=True)
+    times = {"eager": [], "compiled": [], "peak": []}
+    for _ in range(2 if quick else rounds):
+        times["eager"].append(seconds_per_call(recipe, min_seconds=minimum / 2, warmup_calls=3))
+        times["compiled"].append(seconds_per_call(compiled_update, min_seconds=minimum / 2,
+                                                  warmup_calls=3))
+        times["peak"].append(gemm_flops_per_second(min_seconds=minimum / 4))
+    recipe_seconds, compiled_seconds, round_peak = (statistics.median(times[key])
+                                                    for key in ("eager", "compiled", "peak"))
+    speedups = sorted(e / c for e, c in zip(times["eager"], times["compiled"], strict=True))
+    fractions = {key: sorted(flops / p / t for p, t in zip(times["peak"], times[key],
+                                                           strict=True))
+                 for key in ("eager", "compiled")}
+    print(f"sac: {flops / 1e9:.3f} GFLOP; compiled in {compile_seconds:.0f} s; of the bound "
+          f"by round: eager {fractions['eager']}, compiled {fractions['compiled']}", flush=True)
+    rounds_done = len(times["eager"])
+
+    def spread(values: list[float]) -> str:
+        return f"min / median / max {values[0]:.2f} / {statistics.median(values):.2f} / " \
+               f"{values[-1]:.2f}"
+
     return [
-        bound_row("SAC update, recipe, eager (ms)", recipe_seconds, flops, peak),
+        {**bound_row(f"SAC update, recipe, eager, median of {rounds_done} rounds (ms)",
+                     recipe_seconds, flops, round_peak),
+         "ratio": statistics.median(fractions["eager"]),
+         "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {round_peak / 1e9:.0f} "
+                         f"GFLOP/s GEMM, each round's (fraction {spread(fractions['eager'])})"},
+        {**bound_row(f"SAC update, recipe compiled ({mode}; compile {compile_seconds:.0f} s), "
+                     f"median of {rounds_done} rounds (ms)", compiled_seconds, flops,
+                     round_peak),
+         "ratio": statistics.median(fractions["compiled"]),
+         "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {round_peak / 1e9:.0f} "
+                         f"GFLOP/s GEMM, each round's (fraction "
+                         f"{spread(fractions['compiled'])})"},
+        {"measure": f"SAC update, recipe compiled ({mode}), median of {rounds_done} rounds "
+                    "(ms)", "project": 1000 * compiled_seconds,
+         "reference": 1000 * recipe_seconds,
+         "reference is": f"the recipe's eager update, alternating (speed-up {spread(speedups)})",
+         "ratio": statistics.median(speedups)},
         matmul_row("SAC update, recipe, eager (ms)", recipe_seconds, matmul_seconds),
         {"measure": "SAC update, recipe, eager (ms)", "project": 1000 * recipe_seconds,
          "reference": 1000 * torchrl_seconds,
@@ -359,10 +398,6 @@ def sac_rows(tmp: Path, quick: bool, mode: str | None, peak: float) -> list[dict
         {"measure": "SAC update, recipe, eager (ms)", "project": 1000 * recipe_seconds,
          "reference": 1000 * plain_seconds, "reference is": "plain PyTorch (CleanRL's shape)",
          "ratio": plain_seconds / recipe_seconds},
-        {"measure": f"SAC update, recipe compiled ({mode}; compile "
-                    f"{compile_seconds:.0f} s) (ms)",
-         "project": 1000 * compiled_seconds, "reference": 1000 * recipe_seconds,
-         "reference is": "the recipe's eager update", "ratio": recipe_seconds / compiled_seconds},
     ]
 
 
@@ -433,8 +468,9 @@ def heads_rows(tmp: Path, quick: bool, peak: float) -> list[dict]:
 
 # --------------------------------------------------------------------------- step
 def compiled_regions(tmp: Path) -> list:
-    """The parts of the step that ``compile.enabled`` compiles on a CPU, eager, each on a fixed
-    batch: the reward-head losses' forward and backward, and the relabelling's reward call."""
+    """The parts of the step that ``compile.enabled`` compiles, eager, each on a fixed batch:
+    the reward-head losses' forward and backward, the relabelling's reward call and the SAC
+    update."""
     setup = training_setup(tmp, 1024)
     trainer, buffer = setup["trainer"], setup["buffer"]
     batch = trainer.replay.sample(trainer.batch_size)
@@ -444,7 +480,7 @@ def compiled_regions(tmp: Path) -> list:
     def losses() -> None:
         torch.stack([loss(batch)[loss.loss_key] for loss in trainer.losses]).sum().backward()
 
-    return [losses, lambda: relabel(transitions)]
+    return [losses, lambda: relabel(transitions), lambda: setup["update_sac"](transitions)]
 
 
 def step_rows(tmp: Path, quick: bool, mode: str | None, peak: float,
