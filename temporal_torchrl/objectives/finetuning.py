@@ -461,7 +461,9 @@ def _joined(tensors: list[Tensor]) -> Tensor:
     first = tensors[0]
     if len(tensors) == 1:
         return first
-    if first.dim() == 0 or any(tensor.requires_grad for tensor in tensors):
+    # Compiled, inductor plans the copy itself; the storage checks would break the graph.
+    if (torch.compiler.is_compiling() or first.dim() == 0
+            or any(tensor.requires_grad for tensor in tensors)):
         return torch.cat(tensors)
     storage, offset = first.untyped_storage().data_ptr(), first.storage_offset()
     for tensor in tensors:
