@@ -22,8 +22,9 @@ loop    the whole default loop (the shipped encoder at 64 px, FuRL + D3, stage 1
         env, eager), env steps/s in the steady state (the 3rd and 4th episodes, timed at their
         ends: the 1st has no updates), against its bound (its env side, measured without
         updates, plus its updates' FLOPs at the GEMM rate), its ceiling (the env side plus its
-        updates' matmuls alone) and, with ``--baseline-rev REV``, against that git revision's
-        loop, run from a worktree by this script in a subprocess.
+        updates' matmuls alone), compiled (``--compile-mode``) against eager in alternating
+        fresh processes, and, with ``--baseline-rev REV``, against that git revision's loop,
+        run from a worktree by this script in a subprocess.
 sequence  d_sequence (K = 8) against D3: the reward-head update (FuRL + the directional loss,
         D = 1024) and the training step in stage 1 and 2, alternating in one process; the whole
         loop (state encoder, D = 1024, 1 env, eager) in ``--rounds`` alternating runs of each
@@ -622,31 +623,37 @@ def loop_rows(tmp: Path, quick: bool, skip_liv: bool, mode: str | None) -> list[
 DEFAULT_LOOP = ("encoder.name=metaworld_small", "env.image_size=64")
 
 
-def default_loop_rows(tmp: Path, quick: bool) -> list[dict]:
-    rate = steady_steps_per_second(list(DEFAULT_LOOP), 1, 20 if quick else 100, tmp)
-    return [{"measure": "whole default loop, shipped encoder 64 px, 1 env, eager (env steps/s)",
+def default_loop_rows(tmp: Path, quick: bool, compile_mode: str | None = None) -> list[dict]:
+    """The default loop's rate, eager, or compiled with ``compile_mode`` when it is given."""
+    compiled = ["compile.enabled=true", f"compile.mode={compile_mode}"] if compile_mode else []
+    rate = steady_steps_per_second([*DEFAULT_LOOP, *compiled], 1, 20 if quick else 100, tmp)
+    how = f"compiled ({compile_mode})" if compile_mode else "eager"
+    return [{"measure": f"whole default loop, shipped encoder 64 px, 1 env, {how} (env steps/s)",
              "project": rate, "reference": float("nan"), "reference is": "-",
              "ratio": float("nan")}]
 
 
-def fresh_default_loop(tmp: Path, quick: bool, tree: Path) -> float:
-    """The default loop's rate, measured by this script in a fresh process on ``tree``'s recipe
-    and package (``TEMPORAL_TORCHRL_TREE``)."""
+def fresh_default_loop(tmp: Path, quick: bool, tree: Path,
+                       compile_mode: str | None = None) -> float:
+    """The default loop's rate (compiled with ``compile_mode`` when given), measured by this
+    script in a fresh process on ``tree``'s recipe and package (``TEMPORAL_TORCHRL_TREE``)."""
     out = tmp / f"default_{next(RUN_IDS)}.json"
+    compiled = ["--compile-mode", compile_mode, "--default-compiled"] if compile_mode else []
     subprocess.run([sys.executable, __file__, "--sections", "default", "--json", str(out),
-                    "--threads", str(torch.get_num_threads()), *(["--quick"] if quick else [])],
+                    "--threads", str(torch.get_num_threads()), *(["--quick"] if quick else []),
+                    *compiled],
                    env={**os.environ, "TEMPORAL_TORCHRL_TREE": str(tree)}, check=True)
     return json.loads(out.read_text())["rows"][0]["project"]
 
 
 def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
-                  rounds: int = 3) -> list[dict]:
-    """The default loop here and (``revision``) at that git revision, each in a fresh process
-    (the revision's from a worktree), alternating, ``rounds`` times each; and the most that
-    faster updates could give it: its env side (the same loop without updates) plus its
-    updates' FLOPs at the GEMM rate."""
+                  compile_mode: str | None, rounds: int = 3) -> list[dict]:
+    """The default loop here, eager and compiled (``compile_mode``), and (``revision``) at that
+    git revision, each in a fresh process (the revision's from a worktree), alternating,
+    ``rounds`` times each; and the most that faster updates could give it: its env side (the
+    same loop without updates) plus its updates' FLOPs at the GEMM rate."""
     length = 20 if quick else 100
-    ours, theirs = [], []
+    ours, compiled, theirs = [], [], []
     if revision is not None:
         worktree = tmp / "baseline"
         added = subprocess.run(["git", "-C", str(TREE), "worktree", "add", "--detach",
@@ -658,6 +665,8 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     try:
         for _ in range(rounds):
             ours.append(fresh_default_loop(tmp, quick, TREE))
+            compiled.append(fresh_default_loop(tmp, quick, TREE, compile_mode))
+            print(f"default loop: {ours[-1]:.1f} eager, {compiled[-1]:.1f} compiled", flush=True)
             if revision is None:
                 continue
             theirs.append(fresh_default_loop(tmp, quick, worktree))
@@ -686,9 +695,17 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     ceiling = 1.0 / (1.0 / env_rate + matmul_seconds)
     print(f"default loop: env side {env_rate:.1f} steps/s, updates {flops / 1e9:.2f} GFLOP a "
           "step", flush=True)
+    speedups = sorted(c / e for c, e in zip(compiled, ours, strict=True))
     rows = [{"measure": f"whole default loop, shipped encoder 64 px, 1 env, eager, median of "
                         f"{rounds} (env steps/s)", "project": here, "reference": today,
              "reference is": today_is, "ratio": here / today},
+            {"measure": f"whole default loop, compiled ({compile_mode}), median of {rounds} "
+                        "alternating with eager (env steps/s; steady state, compile time not "
+                        "in it)", "project": statistics.median(compiled), "reference": here,
+             "reference is": f"the loop here, eager (speed-up by round: min / median / max "
+                             f"{speedups[0]:.2f} / {statistics.median(speedups):.2f} / "
+                             f"{speedups[-1]:.2f})",
+             "ratio": statistics.median(compiled) / here},
             {"measure": f"whole default loop, bound: its env side ({env_rate:.1f} steps/s "
                         f"without updates) + {flops / 1e9:.2f} GFLOP of updates a step at "
                         f"{peak / 1e9:.0f} GFLOP/s (env steps/s)", "project": bound,
@@ -860,6 +877,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3,
                         help="alternating loop runs of d_sequence and D3 in the sequence "
                              "section (default 3)")
+    parser.add_argument("--default-compiled", action="store_true",
+                        help="the default section's loop compiled (--compile-mode); the loop "
+                             "section runs it so, alternating with eager")
     parser.add_argument("--baseline-rev", default=None,
                         help="git revision whose default loop the loop section measures too")
     args = parser.parse_args()
@@ -887,9 +907,10 @@ def main() -> None:
         if "step" in sections:
             rows += step_rows(tmp, args.quick, args.compile_mode, args.repeats)
         if "default" in sections:
-            rows += default_loop_rows(tmp, args.quick)
+            rows += default_loop_rows(tmp, args.quick,
+                                      args.compile_mode if args.default_compiled else None)
         if "loop" in sections:
-            rows += baseline_rows(tmp, args.quick, args.baseline_rev, peak)
+            rows += baseline_rows(tmp, args.quick, args.baseline_rev, peak, args.compile_mode)
         if "sequence" in sections:
             rows += sequence_head_rows(tmp, args.quick)
             rows += sequence_rows(tmp, args.quick, args.rounds)
