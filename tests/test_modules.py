@@ -53,7 +53,8 @@ def saved_between_forward_and_backward(activation) -> list[torch.dtype]:
                            bw_compiler=lambda graph, example_inputs: graph,
                            partition_fn=min_cut_rematerialization_partition,
                            decompositions=select_decomp_table())
-    torch.compile(layer(activation, train_second=False), backend=backend)(torch.randn(32, 8, requires_grad=True))
+    compiled = torch.compile(layer(activation, train_second=False), backend=backend)
+    compiled(torch.randn(32, 8, requires_grad=True))
     return saved
 
 
