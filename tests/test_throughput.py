@@ -82,10 +82,12 @@ def test_several_envs_resume_like_the_uninterrupted_run(tmp_path):
         torch.testing.assert_close(second["sac_loss"][key], value, msg=key)
 
 
-def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path):
+@pytest.mark.parametrize("stage", [1, 2])
+def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path, stage):
     """compile.enabled on a CPU: the trainer's reward-head losses run through torch.compile
-    (inductor) and give the eager losses' values and gradients on the same stage-2 batch,
-    within float tolerance."""
+    (inductor) and give the eager losses' values and gradients on the same batch, within float
+    tolerance, in stage 1 (negatives alone: one part per loss, the case inductor once returned
+    without its gradient) and stage 2."""
     from helpers import make_episode
 
     from temporal_torchrl.data import EpisodeReplayBuffer
@@ -93,13 +95,14 @@ def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path):
 
     buffer = EpisodeReplayBuffer(capacity=200, history=2, gap=5)
     buffer.extend(stored_rows(make_episode(0, 20), embedding_dtype=torch.float32))
-    buffer.extend(stored_rows(make_episode(1, 20, successes=(12,)),
+    buffer.extend(stored_rows(make_episode(1, 20, successes=(12,) if stage == 2 else ()),
                               embedding_dtype=torch.float32))
     cfg = config(tmp_path, "reward.directional=d3", "compile.enabled=true")
     reward = make_temporal_reward("drawer-open", load_encoder("state", dim=4),
                                   positional="furl", directional="d3")
     trainer = factories.make_reward_trainer(cfg, reward, torch.ones(4), buffer)
     batch = buffer.finetuning.sample(16)
+    assert trainer.stage == stage
     for loss, compiled in zip(trainer.losses, trainer._forwards, strict=True):
         assert compiled is not loss
         parameters = list(loss.parameters())
@@ -140,6 +143,35 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path):
         torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
 
 
+
+
+def test_compiled_run_gives_the_eager_runs_episodes(tmp_path):
+    """The recipe with compile.enabled (the SAC updates, the head losses, the relabelling
+    reward and the policy compiled) against the same run eager: 3 episodes of 20 steps with
+    updates from step 10 on, FuRL + D3 and relay, from the same seed: the same episodes (their
+    stored observations, actions and embeddings, and their logged returns) within float
+    tolerance."""
+    runs = {}
+    for compiled in (False, True):
+        cfg = config(tmp_path / str(compiled), "reward.directional=d3",
+                     f"compile.enabled={compiled}")
+        summary = sac_temporal.train(cfg)
+        runs[compiled] = (summary, list(RunDirectory(tmp_path / str(compiled) / "run")
+                                        .replay_episodes(summary["episodes"])))
+    (eager_summary, eager), (compiled_summary, compiled) = runs[False], runs[True]
+    assert compiled_summary["updates"] == eager_summary["updates"] > 0
+    assert len(compiled) == len(eager) == 3
+    for eager_episode, compiled_episode in zip(eager, compiled, strict=True):
+        for key in ("observation", "action", "embedding"):
+            torch.testing.assert_close(compiled_episode[key], eager_episode[key], rtol=1e-3,
+                                       atol=1e-4, msg=key)
+    eager_rows, compiled_rows = (episode_rows(tmp_path / str(compiled) / "run")
+                                 for compiled in (False, True))
+    for eager_row, compiled_row in zip(eager_rows, compiled_rows, strict=True):
+        assert eager_row.keys() == compiled_row.keys()
+        for key in ("return", "mean_vlm_reward"):
+            assert float(compiled_row[key]) == pytest.approx(float(eager_row[key]), rel=1e-3,
+                                                             abs=1e-4), key
 
 def test_rendering_workers_embed_their_own_frames():
     """Each worker renders (EGL) its own env; one encoder forward embeds both frames, which

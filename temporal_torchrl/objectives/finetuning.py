@@ -130,11 +130,7 @@ class PositionalRankingLoss(LossModule):
             if "later" in rewards:
                 parts["loss_pos_pos"] = ranking_loss(rewards["later"], rewards["earlier"],
                                                      self.delta).mean()
-        total = sum(parts.values(), zero)
-        out = {name: value.detach() for name, value in parts.items()}
-        out["loss_positional"] = total
-        out["stage"] = torch.tensor(stage)
-        return TensorDict(out, [])
+        return _loss_output(self.loss_key, parts, zero, stage)
 
 
 class DirectionalLoss(LossModule):
@@ -229,11 +225,7 @@ class DirectionalLoss(LossModule):
         if stage == 2:
             parts["loss_positive"] = (rewards["opposite"].mean()
                                       - rewards["positive_observed"].mean())
-        total = sum(parts.values(), self.goal_image_embedding.new_zeros(()))
-        out = {name: value.detach() for name, value in parts.items()}
-        out["loss_directional"] = total
-        out["stage"] = torch.tensor(stage)
-        return TensorDict(out, [])
+        return _loss_output(self.loss_key, parts, self.goal_image_embedding.new_zeros(()), stage)
 
     def _score(self, terms: dict[str, _DirectionTerm]) -> dict[str, Tensor]:
         """r_D of every term, with one reward call per variant for the observed terms (the
@@ -370,10 +362,7 @@ class CertaintyLoss(LossModule):
                 (observed - observed_target).pow(2).mean()
                 + (contrasted - certainty(s_t, end - s_t)).pow(2).mean())
             out[f"target_{name}"] = observed_target.mean()
-        out.update({key: value.detach() for key, value in parts.items()})
-        out["loss_certainty"] = sum(parts.values(), zero)
-        out["stage"] = torch.tensor(stage)
-        return TensorDict(out, [])
+        return _loss_output(self.loss_key, parts, zero, stage, out)
 
 
 def finetuning_losses(reward: TemporalReward, goal_image_embedding: Tensor, *,
@@ -436,6 +425,19 @@ def _state_groups(tensordict: TensorDictBase) -> dict[str, TensorDictBase]:
     if pair is not None:
         groups.update(later=pair["later"], earlier=pair["earlier"])
     return groups
+
+
+def _loss_output(loss_key: str, parts: dict[str, Tensor], zero: Tensor, stage: int,
+                 extra: dict[str, Tensor] | None = None) -> TensorDict:
+    """A finetuning loss's output: ``loss_key`` the sum of ``parts`` (to minimise), each part
+    detached, ``stage``, and ``extra`` (metrics) as given."""
+    out = {**(extra or {}), **{name: value.detach() for name, value in parts.items()}}
+    # Not sum(parts, zero): compiled by inductor, one part plus a zero lost its gradient
+    # (simplified to the part, the output merged with the part's detached copy), and the
+    # compiled trainer then skipped the loss: stage 1 trained no heads (torch 2.14).
+    out[loss_key] = torch.stack(list(parts.values())).sum() if parts else zero
+    out["stage"] = torch.tensor(stage)
+    return TensorDict(out, [])
 
 
 def _split_call(function: Callable[[TensorDictBase], Tensor],
