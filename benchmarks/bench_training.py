@@ -60,6 +60,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -167,6 +168,36 @@ def bound_row(measure: str, seconds: float, flops: float, peak: float) -> dict:
                             "GEMM", "ratio": bound / seconds}
 
 
+def spread(values: list[float]) -> str:
+    """``min / median / max`` of ``values``, as the rows write them."""
+    values = sorted(values)
+    return (f"min / median / max {values[0]:.2f} / {statistics.median(values):.2f} / "
+            f"{values[-1]:.2f}")
+
+
+def bound_row_by_round(measure: str, seconds: list[float], flops: float,
+                       peaks: list[float]) -> dict:
+    """:func:`bound_row` for timings taken in rounds, each against the GEMM rate measured in
+    its own round (this VM's load moves both): the medians, and the fraction's spread."""
+    fractions = [flops / peak / time for peak, time in zip(peaks, seconds, strict=True)]
+    peak = statistics.median(peaks)
+    return {**bound_row(measure, statistics.median(seconds), flops, peak),
+            "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {peak / 1e9:.0f} GFLOP/s "
+                            f"GEMM, each round's (fraction {spread(fractions)})",
+            "ratio": statistics.median(fractions)}
+
+
+def alternating_seconds(calls: dict[str, Callable[[], object]], rounds: int,
+                        min_seconds: float) -> dict[str, list[float]]:
+    """Seconds per call of each of ``calls`` in ``rounds`` rounds, the calls taking turns within
+    each round, so that the machine's load changes reach them all alike."""
+    times = {name: [] for name in calls}
+    for _ in range(rounds):
+        for name, call in calls.items():
+            times[name].append(seconds_per_call(call, min_seconds=min_seconds, warmup_calls=3))
+    return times
+
+
 class MatmulRecorder(TorchDispatchMode):
     """Records the matrix products dispatched inside it, forward and backward: each one's op,
     its tensor arguments' shapes, strides and dtypes, and its other arguments."""
@@ -222,10 +253,19 @@ def matmul_row(measure: str, seconds: float, matmul_seconds: float) -> dict:
             "ratio": matmul_seconds / seconds}
 
 
-def gemm_flops_per_second(size: int = 2048, min_seconds: float = 2.0) -> float:
-    a, b = torch.randn(size, size), torch.randn(size, size)
-    seconds = seconds_per_call(lambda: a @ b, min_seconds=min_seconds)
-    return 2 * size ** 3 / seconds
+#: The matmul whose rate is the machine's fp32 GEMM rate: 2048^3, and its FLOPs.
+GEMM_SIZE = 2048
+GEMM_FLOPS = 2 * GEMM_SIZE ** 3
+
+
+def gemm() -> Callable[[], torch.Tensor]:
+    """One call of the reference matmul (``GEMM_FLOPS``), on operands made once."""
+    a, b = torch.randn(GEMM_SIZE, GEMM_SIZE), torch.randn(GEMM_SIZE, GEMM_SIZE)
+    return lambda: a @ b
+
+
+def gemm_flops_per_second(min_seconds: float = 2.0) -> float:
+    return GEMM_FLOPS / seconds_per_call(gemm(), min_seconds=min_seconds)
 
 
 # --------------------------------------------------------------------------- sac
@@ -352,39 +392,20 @@ def sac_rows(tmp: Path, quick: bool, mode: str | None, rounds: int = 5) -> list[
     for _ in range(3):
         compiled_update()
     compile_seconds = time.perf_counter() - start
-    times = {"eager": [], "compiled": [], "peak": []}
-    for _ in range(2 if quick else rounds):
-        times["eager"].append(seconds_per_call(recipe, min_seconds=minimum / 2, warmup_calls=3))
-        times["compiled"].append(seconds_per_call(compiled_update, min_seconds=minimum / 2,
-                                                  warmup_calls=3))
-        times["peak"].append(gemm_flops_per_second(min_seconds=minimum / 4))
-    recipe_seconds, compiled_seconds, round_peak = (statistics.median(times[key])
-                                                    for key in ("eager", "compiled", "peak"))
-    speedups = sorted(e / c for e, c in zip(times["eager"], times["compiled"], strict=True))
-    fractions = {key: sorted(flops / p / t for p, t in zip(times["peak"], times[key],
-                                                           strict=True))
-                 for key in ("eager", "compiled")}
-    print(f"sac: {flops / 1e9:.3f} GFLOP; compiled in {compile_seconds:.0f} s; of the bound "
-          f"by round: eager {fractions['eager']}, compiled {fractions['compiled']}", flush=True)
+    times = alternating_seconds({"eager": recipe, "compiled": compiled_update, "gemm": gemm()},
+                                2 if quick else rounds, minimum / 2)
+    peaks = [GEMM_FLOPS / seconds for seconds in times["gemm"]]
+    recipe_seconds, compiled_seconds = (statistics.median(times[key])
+                                        for key in ("eager", "compiled"))
+    speedups = [e / c for e, c in zip(times["eager"], times["compiled"], strict=True)]
     rounds_done = len(times["eager"])
-
-    def spread(values: list[float]) -> str:
-        return f"min / median / max {values[0]:.2f} / {statistics.median(values):.2f} / " \
-               f"{values[-1]:.2f}"
-
+    print(f"sac: {flops / 1e9:.3f} GFLOP; compiled in {compile_seconds:.0f} s", flush=True)
     return [
-        {**bound_row(f"SAC update, recipe, eager, median of {rounds_done} rounds (ms)",
-                     recipe_seconds, flops, round_peak),
-         "ratio": statistics.median(fractions["eager"]),
-         "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {round_peak / 1e9:.0f} "
-                         f"GFLOP/s GEMM, each round's (fraction {spread(fractions['eager'])})"},
-        {**bound_row(f"SAC update, recipe compiled ({mode}; compile {compile_seconds:.0f} s), "
-                     f"median of {rounds_done} rounds (ms)", compiled_seconds, flops,
-                     round_peak),
-         "ratio": statistics.median(fractions["compiled"]),
-         "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {round_peak / 1e9:.0f} "
-                         f"GFLOP/s GEMM, each round's (fraction "
-                         f"{spread(fractions['compiled'])})"},
+        bound_row_by_round(f"SAC update, recipe, eager, median of {rounds_done} rounds (ms)",
+                           times["eager"], flops, peaks),
+        bound_row_by_round(f"SAC update, recipe compiled ({mode}; compile "
+                           f"{compile_seconds:.0f} s), median of {rounds_done} rounds (ms)",
+                           times["compiled"], flops, peaks),
         {"measure": f"SAC update, recipe compiled ({mode}), median of {rounds_done} rounds "
                     "(ms)", "project": 1000 * compiled_seconds,
          "reference": 1000 * recipe_seconds,
@@ -516,27 +537,15 @@ def step_rows(tmp: Path, quick: bool, mode: str | None, repeats: int) -> list[di
     speedups = sorted(e / c for e, c in zip(eager_times, compiled_times, strict=True))
     eager_seconds = statistics.median(eager_times)
     ceiling = eager_seconds / (eager_seconds - region_seconds + region_matmul_seconds)
-    round_peak = statistics.median(peaks)
-
-    def of_the_bound(measure: str, times: list[float]) -> dict:
-        # Each build's time against the GEMM rate measured just before it (the load moves both).
-        fractions = sorted(flops / p / t for p, t in zip(peaks, times, strict=True))
-        return {**bound_row(measure, statistics.median(times), flops, round_peak),
-                "ratio": statistics.median(fractions),
-                "reference is": f"compute bound: {flops / 1e9:.2f} GFLOP / {round_peak / 1e9:.0f} "
-                                f"GFLOP/s GEMM, each build's (fraction min / median / max "
-                                f"{fractions[0]:.2f} / {statistics.median(fractions):.2f} / "
-                                f"{fractions[-1]:.2f})"}
-
     return [
-        of_the_bound(f"training step, eager, median of {repeats} (ms)", eager_times),
+        bound_row_by_round(f"training step, eager, median of {repeats} builds (ms)",
+                           eager_times, flops, peaks),
         matmul_row(f"training step, eager, median of {repeats} (ms)", eager_seconds,
                    matmul_seconds),
-        of_the_bound(f"training step, compiled ({mode}), median of {repeats} (ms)",
-                     compiled_times),
-        {"measure": f"training step, compiled vs eager (speed-up, {repeats} builds: min / "
-                    f"median / max {speedups[0]:.2f} / {statistics.median(speedups):.2f} / "
-                    f"{speedups[-1]:.2f}; compile {compile_times[0]:.0f} s in the first build, "
+        bound_row_by_round(f"training step, compiled ({mode}), median of {repeats} builds (ms)",
+                           compiled_times, flops, peaks),
+        {"measure": f"training step, compiled vs eager (speed-up, {repeats} builds: "
+                    f"{spread(speedups)}; compile {compile_times[0]:.0f} s in the first build, "
                     f"{statistics.median(compile_times[1:] or compile_times):.0f} s in the "
                     "others)",
          "project": speedups[0], "reference": 1.0, "reference is": "eager (min shown)",
@@ -695,16 +704,14 @@ def baseline_rows(tmp: Path, quick: bool, revision: str | None, peak: float,
     ceiling = 1.0 / (1.0 / env_rate + matmul_seconds)
     print(f"default loop: env side {env_rate:.1f} steps/s, updates {flops / 1e9:.2f} GFLOP a "
           "step", flush=True)
-    speedups = sorted(c / e for c, e in zip(compiled, ours, strict=True))
+    speedups = [c / e for c, e in zip(compiled, ours, strict=True)]
     rows = [{"measure": f"whole default loop, shipped encoder 64 px, 1 env, eager, median of "
                         f"{rounds} (env steps/s)", "project": here, "reference": today,
              "reference is": today_is, "ratio": here / today},
             {"measure": f"whole default loop, compiled ({compile_mode}), median of {rounds} "
                         "alternating with eager (env steps/s; steady state, compile time not "
                         "in it)", "project": statistics.median(compiled), "reference": here,
-             "reference is": f"the loop here, eager (speed-up by round: min / median / max "
-                             f"{speedups[0]:.2f} / {statistics.median(speedups):.2f} / "
-                             f"{speedups[-1]:.2f})",
+             "reference is": f"the loop here, eager (speed-up by round: {spread(speedups)})",
              "ratio": statistics.median(compiled) / here},
             {"measure": f"whole default loop, bound: its env side ({env_rate:.1f} steps/s "
                         f"without updates) + {flops / 1e9:.2f} GFLOP of updates a step at "
@@ -734,13 +741,9 @@ def sequence_head_rows(tmp: Path, quick: bool, rounds: int = 5) -> list[dict]:
 
         for part, make in (("reward-head update", lambda setup: setup["trainer"].update),
                            ("training step", step)):
-            calls = {variant: make(setup) for variant, setup in setups.items()}
-            times = {variant: [] for variant in calls}
-            for _ in range(2 if quick else rounds):
-                for variant, call in calls.items():
-                    times[variant].append(seconds_per_call(
-                        call, min_seconds=0.3 if quick else 1.0, warmup_calls=3) * 1e3)
-            d3, sequence = (statistics.median(times[variant]) for variant in calls)
+            times = alternating_seconds({variant: make(setup) for variant, setup in setups.items()},
+                                        2 if quick else rounds, 0.3 if quick else 1.0)
+            d3, sequence = (1e3 * statistics.median(times[variant]) for variant in setups)
             print(f"{part}, stage {stage}: d_sequence {sequence:.1f} ms, D3 {d3:.1f} ms",
                   flush=True)
             rows.append({"measure": f"{part}, FuRL + d_sequence K=8, stage {stage}, D=1024, "
