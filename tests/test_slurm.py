@@ -86,8 +86,12 @@ def test_a_sweep_with_a_cancelled_job_resumes_it_when_launched_again(tmp_path):
         job = json.loads((runs[0].path / "run.lock.json").read_text())["slurm_job_id"]
         cancelled_at = time.time()
         # At once, as a pre-empted job dies: submitit's job would ignore scancel's SIGTERM until
-        # KillWait, while these tiny episodes take a fraction of a second each.
-        subprocess.run(["scancel", "--signal=KILL", job], check=True)
+        # KillWait, while these tiny episodes take a fraction of a second each. The KILL goes to
+        # the run's step (JOB.0) first: sent to the whole job, it reached the batch shell and
+        # srun, and the run itself lived on for about 7 s, as long as these runs take on a
+        # quiet machine (it then finished before the cancel landed). Then the job is cancelled.
+        subprocess.run(["scancel", "--signal=KILL", f"{job}.0"], check=True)
+        subprocess.run(["scancel", job], check=True)
         wait_for(lambda: not in_queue(job) and runs[0].locked_by() is None, 120,
                  f"job {job} to leave the queue")
         wait_for(lambda: runs[1].summary() is not None, 600, "seed 1's job to finish")
