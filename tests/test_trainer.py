@@ -3,9 +3,11 @@ resuming from its state."""
 
 import copy
 
+import pytest
 import torch
 import torch.nn.functional as F
 from helpers import make_episode
+from tensordict import TensorDict
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.rewards import TemporalReward
@@ -123,3 +125,30 @@ def test_restored_trainer_continues_like_the_uninterrupted_one():
         torch.testing.assert_close(got[key], expected[key], msg=key)
     for a, b in zip(straight.reward.parameters(), restored.reward.parameters(), strict=True):
         torch.testing.assert_close(a, b)
+
+
+def test_a_loss_with_nothing_to_score_leaves_its_heads_and_the_others_train():
+    buffer = filled_buffer()
+    buffer.extend(episode_rows(make_episode(1, 20, successes=(12,)),
+                               embedding_dtype=torch.float32))
+    trainer = make_trainer(buffer)
+    positional, directional = trainer.losses
+    # The positional loss sees a batch without states: no part, a constant loss.
+    trainer._forwards[0] = lambda batch: positional(TensorDict({}, []))
+    before = {loss.loss_key: [p.detach().clone() for p in loss.parameters()]
+              for loss in trainer.losses}
+    metrics = trainer.update()
+    assert "parts" not in metrics.keys() and "loss_pos_neg" not in metrics.keys()
+    for old, new in zip(before["loss_positional"], positional.parameters(), strict=True):
+        torch.testing.assert_close(new.detach(), old)
+    assert any(not torch.equal(old, new.detach()) for old, new in
+               zip(before["loss_directional"], directional.parameters(), strict=True))
+
+
+def test_a_loss_that_scored_parts_without_a_gradient_is_an_error():
+    trainer = make_trainer(filled_buffer())
+    trainer.reward.positional_heads.requires_grad_(False)
+    with pytest.raises(RuntimeError, match=r"PositionalRankingLoss summed 1 part\(s\) into "
+                                           r"'loss_positional' but returned it without a "
+                                           r"gradient"):
+        trainer.update()

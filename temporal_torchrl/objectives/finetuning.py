@@ -335,7 +335,7 @@ class CertaintyLoss(LossModule):
                   if name in tensordict.keys()}
         zero = self.goal_image_embedding.new_zeros(())
         if not groups:
-            return TensorDict({"loss_certainty": zero, "stage": torch.tensor(stage)}, [])
+            return _loss_output(self.loss_key, {}, zero, stage)
         positions, directions, labels = _references(groups)
         scales = reference_scales(positions, directions)
 
@@ -430,13 +430,15 @@ def _state_groups(tensordict: TensorDictBase) -> dict[str, TensorDictBase]:
 def _loss_output(loss_key: str, parts: dict[str, Tensor], zero: Tensor, stage: int,
                  extra: dict[str, Tensor] | None = None) -> TensorDict:
     """A finetuning loss's output: ``loss_key`` the sum of ``parts`` (to minimise), each part
-    detached, ``stage``, and ``extra`` (metrics) as given."""
+    detached, ``stage``, ``"parts"`` (how many were summed: 0 when the batch held nothing to
+    score, and ``loss_key`` is a constant), and ``extra`` (metrics) as given."""
     out = {**(extra or {}), **{name: value.detach() for name, value in parts.items()}}
     # Not sum(parts, zero): compiled by inductor, one part plus a zero lost its gradient
     # (simplified to the part, the output merged with the part's detached copy), and the
     # compiled trainer then skipped the loss: stage 1 trained no heads (torch 2.14).
     out[loss_key] = torch.stack(list(parts.values())).sum() if parts else zero
     out["stage"] = torch.tensor(stage)
+    out["parts"] = torch.tensor(len(parts))
     return TensorDict(out, [])
 
 

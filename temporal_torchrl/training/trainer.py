@@ -8,6 +8,7 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 from torchrl.data import ReplayBuffer
+from torchrl.objectives import LossModule
 
 from temporal_torchrl.objectives import HEADS_LEARNING_RATE, finetuning_losses
 from temporal_torchrl.rewards import TemporalReward
@@ -83,8 +84,8 @@ class RewardHeadTrainer:
         """One finetuning batch, one step per loss; returns the loss terms and the ``stage``."""
         batch = self.replay.sample(self.batch_size)
         outputs = [forward(batch) for forward in self._forwards]
-        trained = [out[loss.loss_key] for loss, out in zip(self.losses, outputs, strict=True)
-                   if out[loss.loss_key].requires_grad]
+        trained = [_trainable(loss, out) for loss, out in zip(self.losses, outputs, strict=True)
+                   if int(out["parts"])]  # a loss with nothing to score in this batch waits
         if trained:
             for optimizer in self.optimizers:
                 optimizer.zero_grad(set_to_none=True)
@@ -95,7 +96,7 @@ class RewardHeadTrainer:
                 optimizer.step()
         metrics = TensorDict({}, [])
         for out in outputs:
-            metrics.update(out.detach())
+            metrics.update(out.exclude("parts").detach())
         metrics["stage"] = torch.tensor(2.0 if "positive" in batch.keys() else 1.0)
         return metrics
 
@@ -106,3 +107,17 @@ class RewardHeadTrainer:
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         for optimizer, saved in zip(self.optimizers, state_dict["optimizers"], strict=True):
             optimizer.load_state_dict(saved)
+
+
+def _trainable(loss: LossModule, out: TensorDict) -> Tensor:
+    """``loss``'s value to minimise, checked to reach its heads: a loss that scored something
+    but returned no gradient would leave its heads untrained without a word (a compiled loss
+    once did, in stage 1)."""
+    value = out[loss.loss_key]
+    if not value.requires_grad:
+        raise RuntimeError(
+            f"{type(loss).__name__} summed {int(out['parts'])} part(s) into {loss.loss_key!r} "
+            "but returned it without a gradient, so its heads would not train. Expected a value "
+            "computed from the heads: check that they require grad and, with compile.enabled, "
+            "compare the compiled loss with the eager one (compile.enabled=false).")
+    return value
