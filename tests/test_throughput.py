@@ -143,35 +143,40 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path):
         torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
 
 
-
-
 def test_compiled_run_gives_the_eager_runs_episodes(tmp_path):
     """The recipe with compile.enabled (the SAC updates, the head losses, the relabelling
     reward and the policy compiled) against the same run eager: 3 episodes of 20 steps with
     updates from step 10 on, FuRL + D3 and relay, from the same seed: the same episodes (their
     stored observations, actions and embeddings, and their logged returns) within float
-    tolerance."""
+    tolerance; and so does an eager run stopped after its first episode and resumed compiled."""
+    def run(name: str, *overrides: str) -> dict:
+        return sac_temporal.train(config(tmp_path / name, "reward.directional=d3", *overrides))
+
+    run("eager", "compile.enabled=false")
+    run("compiled", "compile.enabled=true")
+    run("switched", "compile.enabled=false", "train.stop_after_episodes=1")
+    resumed = run("switched", "resume=true", "compile.enabled=true")
+    assert resumed["config"]["compile"]["enabled"] is True
     runs = {}
-    for compiled in (False, True):
-        cfg = config(tmp_path / str(compiled), "reward.directional=d3",
-                     f"compile.enabled={compiled}")
-        summary = sac_temporal.train(cfg)
-        runs[compiled] = (summary, list(RunDirectory(tmp_path / str(compiled) / "run")
-                                        .replay_episodes(summary["episodes"])))
-    (eager_summary, eager), (compiled_summary, compiled) = runs[False], runs[True]
-    assert compiled_summary["updates"] == eager_summary["updates"] > 0
-    assert len(compiled) == len(eager) == 3
-    for eager_episode, compiled_episode in zip(eager, compiled, strict=True):
-        for key in ("observation", "action", "embedding"):
-            torch.testing.assert_close(compiled_episode[key], eager_episode[key], rtol=1e-3,
-                                       atol=1e-4, msg=key)
-    eager_rows, compiled_rows = (episode_rows(tmp_path / str(compiled) / "run")
-                                 for compiled in (False, True))
-    for eager_row, compiled_row in zip(eager_rows, compiled_rows, strict=True):
-        assert eager_row.keys() == compiled_row.keys()
-        for key in ("return", "mean_vlm_reward"):
-            assert float(compiled_row[key]) == pytest.approx(float(eager_row[key]), rel=1e-3,
-                                                             abs=1e-4), key
+    for name in ("eager", "compiled", "switched"):
+        directory = RunDirectory(tmp_path / name / "run")
+        summary = directory.summary()
+        runs[name] = (summary, list(directory.replay_episodes(summary["episodes"])),
+                      episode_rows(tmp_path / name / "run"))
+    eager_summary, eager, eager_rows = runs.pop("eager")
+    for name, (summary, episodes, rows) in runs.items():
+        assert summary["updates"] == eager_summary["updates"] > 0, name
+        assert len(episodes) == len(eager) == 3, name
+        for eager_episode, episode in zip(eager, episodes, strict=True):
+            for key in ("observation", "action", "embedding"):
+                torch.testing.assert_close(episode[key], eager_episode[key], rtol=1e-3,
+                                           atol=1e-4, msg=f"{name}: {key}")
+        for eager_row, row in zip(eager_rows, rows, strict=True):
+            assert eager_row.keys() == row.keys()
+            for key in ("return", "mean_vlm_reward"):
+                assert float(row[key]) == pytest.approx(float(eager_row[key]), rel=1e-3,
+                                                        abs=1e-4), (name, key)
+
 
 def test_rendering_workers_embed_their_own_frames():
     """Each worker renders (EGL) its own env; one encoder forward embeds both frames, which

@@ -56,8 +56,10 @@ PROCESS_KEYS = ("resume", "overwrite", "output_dir", "runs_dir", "train.stop_aft
 
 
 #: Keys of the run a resumed run may change when they are given on the command line; every
-#: other value comes from the run's saved config.json.
-RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every")
+#: other value comes from the run's saved config.json. Compilation is among them: compiled and
+#: eager give the same episodes within float tolerance (tested), so a long run started eager may
+#: go on compiled, or a run whose compiler fails on a new machine go on eager.
+RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every", "compile.enabled", "compile.mode")
 #: Where a run computes: the same run on another device (the reports group them as one).
 DEVICE_KEYS = ("encoder.device", "train.device", "replay_buffer.device")
 
