@@ -138,7 +138,7 @@ def test_a_loss_with_nothing_to_score_leaves_its_heads_and_the_others_train():
     before = {loss.loss_key: [p.detach().clone() for p in loss.parameters()]
               for loss in trainer.losses}
     metrics = trainer.update()
-    assert "parts" not in metrics.keys() and "loss_pos_neg" not in metrics.keys()
+    assert "summed_parts" not in metrics.keys() and "loss_pos_neg" not in metrics.keys()
     for old, new in zip(before["loss_positional"], positional.parameters(), strict=True):
         torch.testing.assert_close(new.detach(), old)
     assert any(not torch.equal(old, new.detach()) for old, new in

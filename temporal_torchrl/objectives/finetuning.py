@@ -109,7 +109,8 @@ class PositionalRankingLoss(LossModule):
                                              states["previous_embedding"])
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
-        """Losses for one batch: ``loss_positional`` (to minimise), the parts, and ``stage``."""
+        """Losses for one batch: ``loss_positional`` (to minimise), the parts, ``stage`` and
+        ``summed_parts``."""
         zero = self.goal_image_embedding.new_zeros(())
         parts = {}
         stage = 2 if "positive" in tensordict.keys() else 1
@@ -192,7 +193,8 @@ class DirectionalLoss(LossModule):
                                               variant=variant, window=window)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
-        """Losses for one batch: ``loss_directional`` (to minimise), the parts, and ``stage``."""
+        """Losses for one batch: ``loss_directional`` (to minimise), the parts, ``stage`` and
+        ``summed_parts``."""
         remember_certainty_references(self.reward, tensordict)
         # The release scores the contrasted direction at the plain position n(s_t): D3's input.
         variant = self.reward.directional
@@ -328,7 +330,7 @@ class CertaintyLoss(LossModule):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         """Losses for one batch: ``loss_certainty`` (to minimise), its parts, the mean targets
-        of the observed directions, and ``stage``."""
+        of the observed directions, ``stage`` and ``summed_parts``."""
         remember_certainty_references(self.reward, tensordict)
         stage = 2 if "positive" in tensordict.keys() else 1
         groups = {name: tensordict[name] for name in ("negative", "positive")
@@ -430,15 +432,16 @@ def _state_groups(tensordict: TensorDictBase) -> dict[str, TensorDictBase]:
 def _loss_output(loss_key: str, parts: dict[str, Tensor], zero: Tensor, stage: int,
                  extra: dict[str, Tensor] | None = None) -> TensorDict:
     """A finetuning loss's output: ``loss_key`` the sum of ``parts`` (to minimise), each part
-    detached, ``stage``, ``"parts"`` (how many were summed: 0 when the batch held nothing to
-    score, and ``loss_key`` is a constant), and ``extra`` (metrics) as given."""
+    detached, ``stage``, ``summed_parts`` (how many: 0 when the batch held nothing to score,
+    and ``loss_key`` is a constant), and ``extra`` (metrics) as given."""
     out = {**(extra or {}), **{name: value.detach() for name, value in parts.items()}}
     # Not sum(parts, zero): compiled by inductor, one part plus a zero lost its gradient
     # (simplified to the part, the output merged with the part's detached copy), and the
-    # compiled trainer then skipped the loss: stage 1 trained no heads (torch 2.14).
+    # trainer, which then skipped losses without a gradient, trained no heads in stage 1
+    # (torch 2.14); it now raises on a loss that summed parts without one.
     out[loss_key] = torch.stack(list(parts.values())).sum() if parts else zero
     out["stage"] = torch.tensor(stage)
-    out["parts"] = torch.tensor(len(parts))
+    out["summed_parts"] = torch.tensor(len(parts))
     return TensorDict(out, [])
 
 

@@ -59,7 +59,8 @@ PROCESS_KEYS = ("resume", "overwrite", "output_dir", "runs_dir", "train.stop_aft
 #: other value comes from the run's saved config.json. Compilation is among them: compiled and
 #: eager give the same episodes within float tolerance (tested), so a long run started eager may
 #: go on compiled, or a run whose compiler fails on a new machine go on eager.
-RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every", "compile.enabled", "compile.mode")
+RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every", "compile.enabled", "compile.mode",
+                  "compile.cudagraphs")
 #: Where a run computes: the same run on another device (the reports group them as one).
 DEVICE_KEYS = ("encoder.device", "train.device", "replay_buffer.device")
 

@@ -85,7 +85,7 @@ class RewardHeadTrainer:
         batch = self.replay.sample(self.batch_size)
         outputs = [forward(batch) for forward in self._forwards]
         trained = [_trainable(loss, out) for loss, out in zip(self.losses, outputs, strict=True)
-                   if int(out["parts"])]  # a loss with nothing to score in this batch waits
+                   if int(out["summed_parts"])]  # a loss with nothing to score in this batch waits
         if trained:
             for optimizer in self.optimizers:
                 optimizer.zero_grad(set_to_none=True)
@@ -96,7 +96,7 @@ class RewardHeadTrainer:
                 optimizer.step()
         metrics = TensorDict({}, [])
         for out in outputs:
-            metrics.update(out.exclude("parts").detach())
+            metrics.update(out.exclude("summed_parts").detach())
         metrics["stage"] = torch.tensor(2.0 if "positive" in batch.keys() else 1.0)
         return metrics
 
@@ -116,8 +116,9 @@ def _trainable(loss: LossModule, out: TensorDict) -> Tensor:
     value = out[loss.loss_key]
     if not value.requires_grad:
         raise RuntimeError(
-            f"{type(loss).__name__} summed {int(out['parts'])} part(s) into {loss.loss_key!r} "
-            "but returned it without a gradient, so its heads would not train. Expected a value "
-            "computed from the heads: check that they require grad and, with compile.enabled, "
-            "compare the compiled loss with the eager one (compile.enabled=false).")
+            f"{type(loss).__name__} summed {int(out['summed_parts'])} part(s) into "
+            f"{loss.loss_key!r} but returned it without a gradient, so its heads would not "
+            "train. Expected a value computed from the heads: check that they require grad "
+            "and, with compile.enabled, compare the compiled loss with the eager one "
+            "(compile.enabled=false).")
     return value
