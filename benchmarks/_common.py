@@ -2,6 +2,8 @@
 
 Every benchmark script measures the project's code next to its raw reference in the same run and
 prints one markdown table headed by the machine it ran on; ``--json PATH`` also saves the rows.
+``--quick`` shortens the timings; ``--smoke`` runs at tiny sizes, only to check that the script
+runs and gives its rows (the tests run every script so; its figures mean nothing).
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from temporal_torchrl.machine import machine_description
@@ -55,8 +57,12 @@ def report(title: str, rows: list[dict], json_path: str | None = None) -> None:
             {"title": title, "machine": machine_description(), "rows": rows}, indent=2))
 
 
-def parse_args(description: str) -> argparse.Namespace:
+def parse_args(description: str, argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """``--json``, and ``--quick`` or ``--smoke``, from ``argv`` (the command line's if None)."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
-    parser.add_argument("--quick", action="store_true", help="shorter timings (for smoke runs)")
-    return parser.parse_args()
+    size = parser.add_mutually_exclusive_group()
+    size.add_argument("--quick", action="store_true", help="shorter timings")
+    size.add_argument("--smoke", action="store_true",
+                      help="tiny sizes: checks that the script runs (for the tests)")
+    return parser.parse_args(argv)

@@ -2,31 +2,30 @@
 
 Both sides include LIV's preprocessing (uint8 [N, 224, 224, 3] frames -> normalised NCHW), so the
 ratio is the transform's own overhead (tensordict handling, batch flattening, the copy out of
-inference mode). The weights are random (the real ones cannot be downloaded here); speed does not
-depend on their values.
+inference mode). The weights are random (written by ``save_random_liv_checkpoint``, so nothing is
+downloaded); speed does not depend on their values.
 
 CPU rows: batch 1 (one env step) and 32 (a batched env or replay batch), float32; target ratio
 >= 0.95. GPU rows (when CUDA is available): batch 256 in float32, and with bf16 autocast and
-channels-last, frames sent from the CPU as in an env (host-to-device copy included).
+channels-last, frames sent from the CPU as in an env (host-to-device copy included) or made on
+the GPU. ``--smoke``: batches 1 and 2 on the CPU, 4 on the GPU.
 
-    python benchmarks/bench_encoders.py [--quick] [--json out.json]
+    python benchmarks/bench_encoders.py [--quick | --smoke] [--json out.json]
 """
 
 from __future__ import annotations
 
 import contextlib
-import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
+from _common import parse_args, rate, report
 from tensordict import TensorDict
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import parse_args, rate, report  # noqa: E402
-
-from temporal_torchrl.encoders import LIVEncoder, save_random_liv_checkpoint  # noqa: E402
-from temporal_torchrl.transforms import EmbeddingTransform  # noqa: E402
+from temporal_torchrl.encoders import LIVEncoder, save_random_liv_checkpoint
+from temporal_torchrl.transforms import EmbeddingTransform
 
 
 def _compare(encoder: LIVEncoder, batch: int, device: torch.device, autocast_dtype,
@@ -69,25 +68,27 @@ def _compare(encoder: LIVEncoder, batch: int, device: torch.device, autocast_dty
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
-    min_seconds = 0.0 if args.quick else 3.0
-    rounds = 1 if args.quick else 2
+def main(argv: Sequence[str] | None = None) -> None:
+    args = parse_args(__doc__.splitlines()[0], argv)
+    min_seconds = 0.0 if args.quick or args.smoke else 3.0
+    rounds = 1 if args.quick or args.smoke else 2
+    cpu_batches, gpu_batch = ((1, 2), 4) if args.smoke else ((1, 32), 256)
     rows = []
     with tempfile.TemporaryDirectory() as directory:
         checkpoint = Path(directory) / "model.pt"
         save_random_liv_checkpoint(checkpoint)
         cpu = torch.device("cpu")
         encoder = LIVEncoder(checkpoint)
-        for batch in (1, 32):
+        for batch in cpu_batches:
             rows.append(_compare(encoder, batch, cpu, None, cpu, min_seconds, rounds))
         if torch.cuda.is_available():
             gpu = torch.device("cuda")
             encoder = LIVEncoder(checkpoint).to(gpu)
-            rows.append(_compare(encoder, 256, gpu, None, cpu, min_seconds, rounds))
+            rows.append(_compare(encoder, gpu_batch, gpu, None, cpu, min_seconds, rounds))
             encoder = LIVEncoder(checkpoint, channels_last=True).to(gpu)
-            rows.append(_compare(encoder, 256, gpu, torch.bfloat16, cpu, min_seconds, rounds))
-            rows.append(_compare(encoder, 256, gpu, torch.bfloat16, gpu, min_seconds, rounds))
+            for frames_device in (cpu, gpu):
+                rows.append(_compare(encoder, gpu_batch, gpu, torch.bfloat16, frames_device,
+                                     min_seconds, rounds))
     report("EmbeddingTransform (LIV RN50, random weights) vs raw forward", rows, args.json)
 
 

@@ -11,10 +11,13 @@ Rows:
 - env step + fast render: the same with ``render=True`` vs raw step + raw render, timed with
   ``rollout`` (which stacks all frames at the end) and with a ``step_and_maybe_reset`` loop.
 
-Run: ``python benchmarks/bench_envs.py [--quick] [--json out.json]``.
+``--smoke``: 64x64 frames, a few steps, one round.
+Run: ``python benchmarks/bench_envs.py [--quick | --smoke] [--json out.json]``.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -39,42 +42,42 @@ def compare(project_fn, raw_fn, items_per_call: int, seconds: float, rounds: int
     return project, raw
 
 
-def raw_renderer(model: mujoco.MjModel, fast: bool) -> mujoco.Renderer:
+def raw_renderer(model: mujoco.MjModel, fast: bool, size: int = SIZE) -> mujoco.Renderer:
     """A plain ``mujoco.Renderer`` with the fast settings applied as the transform does."""
     if fast:
         model.vis.quality.shadowsize = 0
         model.vis.quality.offsamples = 0
-    renderer = mujoco.Renderer(model, height=SIZE, width=SIZE)
+    renderer = mujoco.Renderer(model, height=size, width=size)
     if fast:
         renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
         renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
     return renderer
 
 
-def bench_render(fast: bool, seconds: float) -> dict:
-    env = make_env(TASK, render=True, image_size=SIZE, camera=CAMERA, fast_render=fast)
+def bench_render(fast: bool, seconds: float, rounds: int = 3, size: int = SIZE) -> dict:
+    env = make_env(TASK, render=True, image_size=size, camera=CAMERA, fast_render=fast)
     tensordict = env.reset()
     transform = env.transform
     raw_env = ALL_V3_ENVIRONMENTS_GOAL_HIDDEN[f"{TASK}-v3-goal-hidden"](seed=0)
     raw_env.reset()
-    renderer = raw_renderer(raw_env.model, fast)
+    renderer = raw_renderer(raw_env.model, fast, size)
 
     def raw_frame() -> np.ndarray:
         renderer.update_scene(raw_env.data, CAMERA)
         return renderer.render()
 
-    project, raw = compare(lambda: transform._call(tensordict), raw_frame, 1, seconds)
+    project, raw = compare(lambda: transform._call(tensordict), raw_frame, 1, seconds, rounds)
     renderer.close()
     env.close()
     mode = "fast" if fast else "default"
-    return {"benchmark": f"render {mode} {SIZE}x{SIZE} (frames/s)", "project": project,
+    return {"benchmark": f"render {mode} {size}x{size} (frames/s)", "project": project,
             "raw": raw, "ratio": project / raw}
 
 
-def raw_stepper(render: bool, steps: int):
+def raw_stepper(render: bool, steps: int, size: int = SIZE) -> Callable[[], None]:
     env = ALL_V3_ENVIRONMENTS_GOAL_HIDDEN[f"{TASK}-v3-goal-hidden"](seed=0)
     env.reset()
-    renderer = raw_renderer(env.model, fast=True) if render else None
+    renderer = raw_renderer(env.model, fast=True, size=size) if render else None
 
     def run() -> None:
         for _ in range(steps):
@@ -88,11 +91,12 @@ def raw_stepper(render: bool, steps: int):
     return run
 
 
-def bench_steps(render: bool, steps: int, seconds: float, stack: bool = True) -> dict:
+def bench_steps(render: bool, steps: int, seconds: float, stack: bool = True,
+                rounds: int = 3, size: int = SIZE) -> dict:
     """``stack=False`` times ``step_and_maybe_reset`` in a loop (what a collector does per
     step) instead of ``rollout``, whose final ``torch.stack`` of all frames is TorchRL's cost,
     not the env's."""
-    env = make_env(TASK, render=render, image_size=SIZE, camera=CAMERA)
+    env = make_env(TASK, render=render, image_size=size, camera=CAMERA)
 
     def step_loop() -> None:
         tensordict = env.reset()
@@ -100,7 +104,7 @@ def bench_steps(render: bool, steps: int, seconds: float, stack: bool = True) ->
             _, tensordict = env.step_and_maybe_reset(env.rand_action(tensordict))
 
     project_fn = (lambda: env.rollout(steps, break_when_any_done=False)) if stack else step_loop
-    project, raw = compare(project_fn, raw_stepper(render, steps), steps, seconds)
+    project, raw = compare(project_fn, raw_stepper(render, steps, size), steps, seconds, rounds)
     env.close()
     label = "env step + fast render" if render else "env step, no rendering"
     how = "rollout" if stack else "step loop"
@@ -108,15 +112,18 @@ def bench_steps(render: bool, steps: int, seconds: float, stack: bool = True) ->
             "ratio": project / raw}
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
-    seconds = 1.5 if args.quick else 4.0
+def main(argv: Sequence[str] | None = None) -> None:
+    args = parse_args(__doc__.splitlines()[0], argv)
+    seconds, steps, render_steps, rounds, size = ((0.01, 10, 3, 1, 64) if args.smoke
+                                                  else (1.5, 500, 100, 3, SIZE) if args.quick
+                                                  else (4.0, 500, 250, 3, SIZE))
     rows = [
-        bench_render(fast=True, seconds=seconds),
-        bench_render(fast=False, seconds=seconds),
-        bench_steps(render=False, steps=500, seconds=seconds),
-        bench_steps(render=True, steps=100 if args.quick else 250, seconds=seconds),
-        bench_steps(render=True, steps=100 if args.quick else 250, seconds=seconds, stack=False),
+        bench_render(fast=True, seconds=seconds, rounds=rounds, size=size),
+        bench_render(fast=False, seconds=seconds, rounds=rounds, size=size),
+        bench_steps(render=False, steps=steps, seconds=seconds, rounds=rounds, size=size),
+        bench_steps(render=True, steps=render_steps, seconds=seconds, rounds=rounds, size=size),
+        bench_steps(render=True, steps=render_steps, seconds=seconds, stack=False,
+                    rounds=rounds, size=size),
     ]
     report(f"envs: {TASK}, camera {CAMERA}", rows, args.json)
 

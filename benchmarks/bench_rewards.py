@@ -7,10 +7,12 @@ Rows:
 2. An env rollout (Metaworld drawer-open, the render-free ``state`` encoder) with and without the
    history and reward transforms: the difference per step is their cost.
 
-Run: ``python benchmarks/bench_rewards.py [--quick] [--json out.json]``.
+Run: ``python benchmarks/bench_rewards.py [--quick | --smoke] [--json out.json]``.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -24,9 +26,10 @@ BATCH, DIM = 256, 1024
 ROUNDS = 5
 
 
-def _paired_seconds(project, reference, min_seconds: float, warmup_calls: int = 2):
-    """Best-of-rounds seconds per call of both, alternating rounds: the 2-core machine is
-    shared, so a single long measurement of each would compare different loads."""
+def _paired_seconds(project: Callable[[], object], reference: Callable[[], object],
+                    min_seconds: float, warmup_calls: int = 2) -> tuple[float, float]:
+    """Best-of-rounds seconds per call of both, alternating rounds: on a shared machine a
+    single long measurement of each would compare different loads."""
     project_times, reference_times = [], []
     for _ in range(ROUNDS):
         project_times.append(seconds_per_call(project, min_seconds / ROUNDS, warmup_calls))
@@ -98,11 +101,11 @@ def bench_rollout(steps: int, min_seconds: float) -> dict | None:
             "transforms_ms_per_step": (with_transforms - without) / steps * 1e3}
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
-    min_seconds = 0.5 if args.quick else 2.0
+def main(argv: Sequence[str] | None = None) -> None:
+    args = parse_args(__doc__.splitlines()[0], argv)
+    min_seconds, steps = (0.05, 10) if args.smoke else (0.5, 50) if args.quick else (2.0, 100)
     rows = [bench_relabel(min_seconds)]
-    rollout = bench_rollout(50 if args.quick else 100, min_seconds)
+    rollout = bench_rollout(steps, min_seconds)
     if rollout is not None:
         rows[0]["transforms_ms_per_step"] = float("nan")
         rows.append(rollout)

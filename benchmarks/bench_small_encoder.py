@@ -3,25 +3,26 @@
 Rows: images/s of ``metaworld_small`` at its input size (64x64 frames, no resize) and from
 224x224 frames (resized by the encoder), batch 1 and 32, next to the random-weight LIV RN50
 (the reference: LIV's architecture, 224x224 frames) measured in the same run.
-Run: ``python benchmarks/bench_small_encoder.py [--quick] [--json out.json]``.
+``--smoke``: batches 1 and 2.
+Run: ``python benchmarks/bench_small_encoder.py [--quick | --smoke] [--json out.json]``.
 """
 
 from __future__ import annotations
 
-import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
+from _common import parse_args, rate, report
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks._common import parse_args, rate, report  # noqa: E402
-from temporal_torchrl.encoders import load_encoder, save_random_liv_checkpoint  # noqa: E402
+from temporal_torchrl.encoders import load_encoder, save_random_liv_checkpoint
 
 
-def main() -> None:
-    args = parse_args(__doc__.split("\n")[0])
-    seconds = 0.5 if args.quick else 2.0
+def main(argv: Sequence[str] | None = None) -> None:
+    args = parse_args(__doc__.split("\n")[0], argv)
+    seconds = 0.05 if args.smoke else 0.5 if args.quick else 2.0
+    batches = (1, 2) if args.smoke else (1, 32)
     small = load_encoder("metaworld_small")
     with tempfile.TemporaryDirectory() as directory:
         path = Path(directory) / "random_liv.pt"
@@ -32,7 +33,7 @@ def main() -> None:
         return torch.randint(0, 256, (batch, size, size, 3), dtype=torch.uint8)
 
     rows = []
-    for batch in (1, 32):
+    for batch in batches:
         liv_frames = frames(batch, 224)
         # RN50 is slow on a CPU: time it briefly, once per batch size.
         reference = rate(lambda f=liv_frames: liv.embed_images(f), batch,

@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +65,7 @@ def slope(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.polyfit(x, y, 1)[0])
 
 
-def main() -> None:
+def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--steps", type=int, default=20, help="env steps per episode")
@@ -74,7 +75,7 @@ def main() -> None:
     parser.add_argument("--logger", default="csv", choices=("csv", "none"),
                         help="logger.backend (TorchRL's CSV logger keeps every value in memory)")
     parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
 
     run_dir = Path(tempfile.mkdtemp(prefix="soak_")) / "run"
     command = [sys.executable, str(RECIPE), "encoder.name=state", "+encoder.options.dim=32",

@@ -1,5 +1,5 @@
 """Zero-shot value-order correlation of image/text encoders on the six held-out evaluation tasks
-(what it measures: :mod:`temporal_torchrl.encoders.evaluation`).
+(what it measures: :mod:`temporal_torchrl.reward_quality.encoder_evaluation`).
 
     python recipes/evaluate_encoder.py                      # shipped small encoder vs baselines
     python recipes/evaluate_encoder.py --liv-checkpoint model.pt   # adds real LIV
@@ -13,13 +13,13 @@ from pathlib import Path
 import torch
 
 import temporal_torchrl  # noqa: F401  (chooses the GL backend before mujoco loads)
-from temporal_torchrl.encoders.evaluation import (
+from temporal_torchrl.encoders.small import SmallEncoder
+from temporal_torchrl.reward_quality.encoder_evaluation import (
     collect_evaluation_videos,
     default_encoders,
     evaluate_encoders,
     markdown_table,
 )
-from temporal_torchrl.encoders.small import SmallEncoder
 
 
 def main() -> None:

@@ -44,6 +44,7 @@ from temporal_torchrl.configs.rules import (
 from temporal_torchrl.data import EpisodeReplayBuffer, goal_image_embedding
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs import baseline_text, get_task
+from temporal_torchrl.envs.task_reward import task_text_embeddings
 from temporal_torchrl.machine import machine_description
 from temporal_torchrl.reward_quality import (
     DatasetSpec,
@@ -56,8 +57,8 @@ from temporal_torchrl.reward_quality import (
     score_reward,
     split_by_episode,
     success_length,
-    variant_reward,
 )
+from temporal_torchrl.rewards import reward_from_config
 from temporal_torchrl.runs import write_json
 from temporal_torchrl.training import factories
 
@@ -111,12 +112,11 @@ def prepare_task(cfg: DictConfig, encoder: Encoder) -> TaskData:
     outcomes = list(zip(held_out.episodes, held_out.successful, strict=True))
     goal_image = goal_image_embedding(next(
         episode for episode, ok in zip(train.episodes, train.successful, strict=True) if ok))
-    texts = encoder.embed_text([get_task(cfg.env.task).goal_prompt,
-                                baseline_text(cfg.env.task, cfg.reward.baseline)]).cpu()
+    goal, baseline = task_text_embeddings(cfg.env.task, encoder, cfg.reward.baseline)
     return TaskData(dataset, train, held_out,
                     successful=[episode for episode, ok in outcomes if ok],
                     failed=[episode for episode, ok in outcomes if not ok],
-                    goal_image=goal_image, goal_embedding=texts[0], baseline_embedding=texts[1])
+                    goal_image=goal_image, goal_embedding=goal, baseline_embedding=baseline)
 
 
 def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
@@ -145,11 +145,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
     for variant in config_variants(cfg):
         variant_start = time.perf_counter()
         torch.manual_seed(cfg.env.seed)  # the same initial heads whatever the variant order
-        reward = variant_reward(
-            variant, encoder.dim, goal_embedding, baseline_embedding, k=cfg.reward.k,
-            alpha=cfg.reward.alpha, projection=cfg.reward.projection,
-            window_length=cfg.reward.window, certainty_bandwidth=cfg.reward.certainty_bandwidth,
-            certainty_prior=cfg.reward.certainty_prior)
+        reward = reward_from_config(cfg, goal_embedding, baseline_embedding, variant=variant)
         has_heads = (reward.positional_heads is not None
                      or reward.directional_heads is not None)
         states = ["untrained", "finetuned"] if has_heads else ["zero-shot"]

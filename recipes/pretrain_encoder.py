@@ -39,17 +39,17 @@ import numpy as np
 import torch
 
 import temporal_torchrl  # noqa: F401  (chooses the GL backend before mujoco loads)
-from temporal_torchrl.encoders.evaluation import (
+from temporal_torchrl.encoders.small import WEIGHTS_DIR, SmallEncoder
+from temporal_torchrl.envs import EVALUATION_TASKS, TASKS, collect_expert_episodes
+from temporal_torchrl.machine import machine_description
+from temporal_torchrl.objectives.liv import LIVLoss
+from temporal_torchrl.reward_quality.encoder_evaluation import (
     collect_evaluation_videos,
     default_encoders,
     episode_frames,
     evaluate_encoders,
     markdown_table,
 )
-from temporal_torchrl.encoders.small import WEIGHTS_DIR, SmallEncoder
-from temporal_torchrl.envs import EVALUATION_TASKS, TASKS, collect_expert_episodes
-from temporal_torchrl.machine import machine_description
-from temporal_torchrl.objectives.liv import LIVLoss
 
 
 @dataclass

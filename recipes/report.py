@@ -131,6 +131,13 @@ def import_reward_modules(run_dir: Path) -> None:
         load_modules(modules)
 
 
+def portable_path(path: Path) -> str:
+    """``path`` as a report may print it: relative to the working directory when inside it
+    (as typed in the README's commands), else its name alone (no machine's paths)."""
+    resolved, here = path.resolve(), Path.cwd().resolve()
+    return resolved.relative_to(here).as_posix() if here in resolved.parents else path.name
+
+
 def metric_file(key: str) -> str:
     """``sac/loss_qvalue`` -> ``metric_sac-loss_qvalue.png``."""
     return "metric_" + re.sub(r"[^A-Za-z0-9_.]+", "-", key).strip("-") + ".png"
@@ -153,7 +160,7 @@ def main(argv: list[str] | None = None) -> None:
                              f"metrics.jsonl, else its logs/*/scalars); logged keys: "
                              f"{', '.join(sorted(logged)) or 'none'}.")
     args.out.mkdir(parents=True, exist_ok=True)
-    sections = ["# Report", "", f"Runs from: {', '.join(map(str, args.dirs))}", "",
+    sections = ["# Report", "", f"Runs from: {', '.join(map(portable_path, args.dirs))}", "",
                 HOW_TO_READ.format(resamples=args.bootstrap, seed=args.seed,
                                    baseline=baseline),
                 grouping_markdown(groups)]
@@ -166,7 +173,7 @@ def main(argv: list[str] | None = None) -> None:
         write_csv(args.out / f"{metric}.csv", table_rows(table), CSV_COLUMNS)
         sections.append(markdown)
         print(markdown)
-    write_csv(args.out / "runs.csv", run_rows(groups), RUN_COLUMNS)
+    write_csv(args.out / "runs.csv", run_rows(groups, args.dirs), RUN_COLUMNS)
 
     reliable = [build_reliable_table(groups, metric, baseline=baseline, reps=args.bootstrap,
                                      seed=args.seed) for metric in METRICS]

@@ -27,64 +27,65 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 
 import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from tqdm import tqdm
 
 from temporal_torchrl.configs.rules import validate_recipe_config
 from temporal_torchrl.data import episode_rows
 from temporal_torchrl.runs import (
     RunDirectory,
-    RunLockedError,
     override_keys,
-    resumed_config,
     run_directory,
+    run_sweep_job,
     sweep_job_config,
     uses_vlm_reward,
 )
 from temporal_torchrl.training import (
     EpisodeAssembler,
     MetricWindow,
-    TrainingProgress,
     TrainingState,
     episode_row,
     factories,
     log_metrics,
-    progress_from,
     reward_statistics,
     run_summary,
-    set_rng_state,
+    start_run,
 )
 
+#: Called after each episode the run records, with its number and the run's env steps then.
+EpisodeEndHook = Callable[[int, int], None]
 
-def train(cfg: DictConfig, given_keys: Collection[str] | None = None) -> dict | None:
+
+def train(cfg: DictConfig, given_keys: Collection[str] | None = None,
+          on_episode_end: EpisodeEndHook | None = None) -> dict | None:
     """Run (or resume) one training run; returns its summary, or None when stopped early.
 
     ``given_keys``: the keys set on the command line, which alone may change a resumed run's
-    ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do). The run
-    directory's lock is held throughout: ``RunLockedError`` at once when a live process holds it.
+    ``train.episodes`` and ``train.checkpoint_every`` (None: all of ``cfg``'s do).
+    ``on_episode_end(episode, env_steps)``: called once each episode is recorded (benchmarks time
+    the loop with it). The run directory's lock is held throughout: ``RunLockedError`` at once
+    when a live process holds it.
     """
     cfg = validate_recipe_config(cfg)
     run = RunDirectory(run_directory(cfg))
     with run.lock():  # one writer per run directory, for the whole run
-        return _train(cfg, run, given_keys)
+        return _train(cfg, run, given_keys, on_episode_end or (lambda episode, env_steps: None))
 
 
-def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | None) -> dict | None:
+def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | None,
+           on_episode_end: EpisodeEndHook) -> dict | None:
     """:func:`train`, once the run's lock is held."""
-    run.check(resume=cfg.resume, overwrite=cfg.overwrite)
-    if cfg.resume:
-        # The saved config, continued, is the one that runs: validated again.
-        cfg = validate_recipe_config(resumed_config(cfg, run.path, given_keys))
-    checkpoint = run.resume_state() if cfg.resume else None
-    if checkpoint is not None and checkpoint["episode"] >= cfg.train.episodes and run.summary():
-        print(f"{run.path}: already complete ({checkpoint['episode']} episodes)")
-        return run.summary()
+    start = start_run(run, cfg, given_keys)  # afresh, from the checkpoint, or already complete
+    if start.complete:
+        print(f"{run.path}: already complete ({start.checkpoint.episode} episodes)")
+        return start.summary
+    cfg, saved = start.cfg, start.checkpoint  # saved: None on a fresh start
     torch.manual_seed(cfg.env.seed)
 
     # ---- encoder, reward, env
@@ -94,57 +95,45 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     print(f"run directory: {run.path}")
     print(factories.describe_encoder(cfg, encoder))
 
-    # ---- stage 2's preloaded positives and the goal image s_g
+    # ---- stage 2's preloaded positives and the goal image s_g (a resume has them saved)
     finetune = reward is not None and (reward.positional_heads is not None
                                        or reward.directional_heads is not None)
-    preloaded, goal_image = (factories.make_preloaded_positives(cfg, encoder, finetune)
-                             if checkpoint is None else ([], checkpoint["goal_image"]))
+    if saved is None:
+        preloaded, goal_image = factories.make_preloaded_positives(cfg, encoder, finetune)
+        expert_rows = sum(len(rows) for rows in preloaded)
+    else:
+        preloaded, goal_image, expert_rows = [], saved.goal_image, saved.expert_rows
 
     # ---- SAC, replay buffer, reward-head trainer
     actor, critics = factories.make_sac_agent(cfg, env)
     sac_loss, sac_optimizer = factories.make_sac_loss(cfg, actor, critics,
                                                       env.action_spec.shape[-1])
     update_sac = factories.make_sac_update(cfg, sac_loss, sac_optimizer)
-    expert_rows = (checkpoint["expert_rows"] if checkpoint is not None
-                   else sum(len(rows) for rows in preloaded))
     buffer = factories.make_replay_buffer(cfg, factories.replay_capacity(
-        cfg, expert_rows, saved=checkpoint["buffer_capacity"] if checkpoint else None), reward)
+        cfg, expert_rows, saved=saved.buffer_capacity if saved else None), reward)
     trainer = factories.make_reward_trainer(cfg, reward, goal_image, buffer) if finetune else None
 
-    # ---- fresh start, or resume: the buffer refilled, then modules and counters restored
-    if checkpoint is None:
-        run.create(config=OmegaConf.to_container(cfg, resolve=True))
-        for index, rows in enumerate(preloaded):
-            buffer.extend(rows)
-            run.save_replay_episode(index, rows)
-        progress = TrainingProgress(inserted=len(preloaded))
-    else:
-        progress = progress_from(checkpoint)
-        for rows in run.replay_episodes(progress.inserted):
-            buffer.extend(rows)
-    relay = (factories.make_relay(cfg, env, actor, buffer.num_positive_states)
-             if cfg.train.relay and trainer is not None else None)
+    # ---- the replay filled, the relay, then the checkpoint's modules and counters restored
+    progress = start.fill_replay(buffer, preloaded)
+    relay = factories.make_relay(cfg, env, actor, buffer.num_positive_states, finetune)
     state = TrainingState(progress, sac_loss=sac_loss, sac_optimizer=sac_optimizer,
                           reward=reward, trainer=trainer, relay=relay, goal_image=goal_image,
                           buffer_capacity=buffer.capacity, expert_rows=expert_rows,
                           preloaded=buffer.num_permanent_episodes)
-    if checkpoint is not None:
-        state.load_state_dict(checkpoint)
+    start.restore(state)
     print(f"relay exploration: {factories.describe_relay(cfg, relay)}")
-    collector = factories.make_collector(cfg, env, relay.policy if relay else actor,
+    collector = factories.make_collector(cfg, env, relay.policy,
                                          max(0, cfg.train.random_steps - progress.env_steps))
     random_until = progress.env_steps + collector.init_random_frames
-    if checkpoint is not None:  # after every random draw the build makes
-        set_rng_state(checkpoint["rng"])
+    start.restore_rng()  # after every random draw the build makes
     logger = factories.make_logger(cfg, run.path)
     metrics = MetricWindow()
     embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
-    stage = lambda: 2 if buffer.has_positives else 1  # noqa: E731  (the finetuning's stage)
-    episodes = EpisodeAssembler(cfg.env.num_envs, stage())
+    episodes = EpisodeAssembler(cfg.env.num_envs, buffer.stage)
 
     def log_training_metrics() -> None:
         progress.last_metrics = metrics.flush() | {
-            "train/stage": float(stage()), "train/positive_states": buffer.num_positive_states}
+            "train/stage": float(buffer.stage), "train/positive_states": buffer.num_positive_states}
         log_metrics(logger, progress.last_metrics, progress.env_steps)
 
     def update(env_steps: int) -> None:
@@ -156,8 +145,7 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
             metrics.add("reward", trainer.update())
         for _ in range(sac_updates):
             batch = buffer.sample()  # rewards relabelled with the current heads
-            relay_batch = (relay.task_reward_batch(batch)
-                           if relay is not None and relay.schedule.active else None)
+            relay_batch = relay.batch_to_learn(batch)  # before SAC's update adds keys to batch
             metrics.add("sac", update_sac(batch))
             if relay_batch is not None:  # the relay agent learns from the same batches
                 metrics.add("relay", relay.update(relay_batch))
@@ -181,11 +169,10 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
         run.append_episode(row)
         logged = {f"train/{key}": float(row[key])
                   for key in ("success", "return", "mean_vlm_reward", "stage")}
-        if relay is not None:
-            logged["train/relay_fraction"] = (relay.schedule.episode_relay_steps(index)
-                                              / len(trajectory))
+        logged |= relay.episode_metrics(index, len(trajectory))
         log_metrics(logger, logged, progress.env_steps)
-        episodes.begin(index, stage())
+        episodes.begin(index, buffer.stage)
+        on_episode_end(progress.episode, progress.env_steps)
 
     # ---- training loop: one vector step of env.num_envs envs, then its updates
     num_envs, start_time, start_steps = cfg.env.num_envs, time.perf_counter(), progress.env_steps
@@ -196,22 +183,20 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
         if progress.env_steps > cfg.train.random_steps and buffer.num_transitions > 0:
             update(num_envs)
         ended = episodes.add(data)
-        if relay is not None:
-            relay.schedule.advance(ended, acted=progress.env_steps > random_until)
+        relay.advance(ended, acted=progress.env_steps > random_until)
         if not ended:
             continue
         checkpointed_before = progress.episode // cfg.train.checkpoint_every
         for index in ended[:cfg.train.episodes - progress.episode]:  # in env order
             finish_episode(index)
             bar.update(1)
-        if relay is not None:
-            relay.schedule.end_if_enough(buffer.num_positive_states)
+        relay.end_if_enough(buffer.num_positive_states)
         steps_per_second = (progress.env_steps - start_steps) / (time.perf_counter() - start_time)
         bar.set_postfix(success_rate=f"{sum(progress.successes) / len(progress.successes):.2f}",
                         steps_per_s=f"{steps_per_second:.0f}")
         done = progress.episode >= cfg.train.episodes
         if progress.episode // cfg.train.checkpoint_every > checkpointed_before or done:
-            run.save_checkpoint(state.state_dict())
+            run.save_checkpoint(state.checkpoint())
         if done or progress.episode >= (cfg.train.stop_after_episodes or math.inf):
             break
     bar.close()
@@ -224,34 +209,40 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     summary = run_summary(
         cfg, progress, encoder=cfg.encoder.name if encoder is not None else None,
         steps_per_second=(progress.env_steps - start_steps) / (time.perf_counter() - start_time),
-        relay_steps=relay.schedule.total_relay_steps if relay is not None else 0)
+        relay_steps=relay.total_steps)
     run.write_summary(summary)
     log_metrics(logger, {f"summary/{key}": float(summary[key]) for key in ("ttfs", "tt50s")},
                 progress.env_steps)
     return summary
 
 
-@hydra.main(version_base=None, config_path=".", config_name="config")
-def main(cfg: DictConfig) -> None:
+def run(cfg: DictConfig, given_keys: Collection[str] | None = None) -> None:
+    """:func:`train` in this process, with ``train.threads`` torch threads; prints the summary."""
     # Libraries log their progress at INFO (open_clip's model creation, TorchRL's storage); the
     # recipe prints its own lines and a progress bar, which those would interleave with.
     for name in ("", "torchrl"):
         logging.getLogger(name).setLevel(logging.WARNING)
-    hydra_config = HydraConfig.get()
-    if hydra_config.mode == RunMode.MULTIRUN:
-        cfg = sweep_job_config(cfg, hydra_config)
     if cfg.train.threads is not None:
         torch.set_num_threads(cfg.train.threads)
-    try:
-        summary = train(cfg, given_keys=override_keys(hydra_config.overrides.task))
-    except RunLockedError as error:
-        if hydra_config.mode != RunMode.MULTIRUN:
-            raise
-        print(error.skip_line())  # the other jobs of the sweep go on
-        return
+    summary = train(cfg, given_keys)
     if summary is not None:
         print({key: summary[key] for key in ("ttfs", "tt50s", "ras", "episodes", "env_steps",
                                               "steps_per_second")})
+
+
+@hydra.main(version_base=None, config_path=".", config_name="config")
+def main(cfg: DictConfig) -> None:
+    hydra_config = HydraConfig.get()
+    given_keys = override_keys(hydra_config.overrides.task)
+    if hydra_config.mode != RunMode.MULTIRUN:
+        run(cfg, given_keys)
+        return
+    # A sweep job trains in a process of its own, so that whatever ends it is reported at once,
+    # naming the job and its run, while the other jobs go on (temporal_torchrl.runs.sweep_job).
+    cfg = sweep_job_config(cfg, hydra_config)
+    if cfg is not None:
+        job = f"#{hydra_config.job.num} ({' '.join(hydra_config.overrides.task)})"
+        run_sweep_job(__file__, run.__name__, cfg, given_keys, job, run_directory(cfg))
 
 
 if __name__ == "__main__":

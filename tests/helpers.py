@@ -1,6 +1,12 @@
-"""Helpers the test files share: tiny recipe configs and hand-made episodes with known values."""
+"""Helpers the test files share: tiny recipe configs, the one factory of synthetic episodes,
+and waits that fail the test, naming what did not happen, instead of hanging or carrying on."""
 
 import csv
+import os
+import select
+import signal
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -11,6 +17,7 @@ from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 D = 4
+OBSERVATION_SIZE, ACTION_SIZE = 39, 4  # Metaworld's
 
 # Tiny but complete: 20-step episodes, updates from step 11 on, small networks and batches.
 QUICK = [
@@ -32,28 +39,127 @@ def episode_csv_rows(run_dir: Path) -> list[dict]:
         return list(csv.DictReader(file))
 
 
-def make_episode(episode: int, steps: int, successes=(), dim: int = D) -> TensorDict:
-    """An episode whose state t has embedding and observation all equal to 100 * episode + t."""
-    states = (100.0 * episode + torch.arange(steps + 1, dtype=torch.float32)).unsqueeze(-1)
+# --------------------------------------------------------------------------- synthetic episodes
+def synthetic_episode(embeddings: torch.Tensor, next_success=None,
+                      observations: torch.Tensor | None = None,
+                      actions: torch.Tensor | None = None) -> TensorDict:
+    """An episode in ``env.rollout()`` layout ``[T]`` through the states s_0 .. s_T.
+
+    Args:
+        embeddings: s_0 .. s_T, ``[T + 1, D]``: ``"embedding"`` is s_t, ``("next",
+            "embedding")`` s_(t+1).
+        next_success: ``("next", "success")`` of the T transitions (the success of s_1 .. s_T;
+            s_0 never succeeds), ``[T]`` booleans; default never.
+        observations: the observations of s_0 .. s_T ``[T + 1, 39]``; default zeros.
+        actions: ``[T, 4]``; default uniform in [0, 1) from torch's generator.
+    """
+    steps = embeddings.shape[0] - 1
     success = torch.zeros(steps + 1, 1, dtype=torch.bool)
-    for t in successes:  # success after transition t
-        success[t + 1] = True
+    if next_success is not None:
+        success[1:] = torch.as_tensor(next_success, dtype=torch.bool).reshape(steps, 1)
+    if observations is None:
+        observations = torch.zeros(steps + 1, OBSERVATION_SIZE)
     return TensorDict({
-        "observation": states.expand(-1, 39)[:-1].clone(),
-        "embedding": states.expand(-1, dim)[:-1].clone(),
-        "action": torch.rand(steps, 4),
+        "observation": observations[:-1].clone(),
+        "embedding": embeddings[:-1].clone(),
+        "action": torch.rand(steps, ACTION_SIZE) if actions is None else actions,
         "success": success[:-1],
-        "next": {"observation": states.expand(-1, 39)[1:].clone(),
-                 "embedding": states.expand(-1, dim)[1:].clone(),
+        "next": {"observation": observations[1:].clone(),
+                 "embedding": embeddings[1:].clone(),
                  "success": success[1:],
                  "terminated": torch.zeros(steps, 1, dtype=torch.bool)},
     }, [steps])
+
+
+def make_episode(number: int, steps: int, successes=(), dim: int = D) -> TensorDict:
+    """An episode whose state t has embedding and observation all equal to 100 * number + t
+    (see :func:`marker`), successful after the transitions ``successes``."""
+    states = (100.0 * number + torch.arange(steps + 1, dtype=torch.float32)).unsqueeze(-1)
+    next_success = torch.zeros(steps, dtype=torch.bool)
+    next_success[list(successes)] = True
+    return synthetic_episode(states.expand(-1, dim), next_success,
+                   observations=states.expand(-1, OBSERVATION_SIZE))
 
 
 def marker(values: torch.Tensor) -> torch.Tensor:
     return values[..., 0]
 
 
-def insert(buffer: EpisodeReplayBuffer, episode: int, steps: int, successes=(), **kwargs):
-    """Insert make_episode(episode, steps, successes) into ``buffer``; returns its rows."""
-    return buffer.extend(episode_rows(make_episode(episode, steps, successes, **kwargs)))
+def insert(buffer: EpisodeReplayBuffer, number: int, steps: int, successes=(), **kwargs):
+    """Insert make_episode(number, steps, successes) into ``buffer``; returns its rows."""
+    return buffer.extend(episode_rows(make_episode(number, steps, successes, **kwargs)))
+
+
+# --------------------------------------------------------------------------- waits that fail
+class WaitTimeout(AssertionError):
+    """A wait of a test ran out: what it waited for did not happen (a failure, not a hang)."""
+
+
+def wait_until(condition: Callable[[], bool], timeout: float, what: str,
+               interval: float = 0.05, alive: Callable[[], str | None] | None = None) -> None:
+    """Poll ``condition`` until it holds; fail naming ``what`` after ``timeout`` seconds, or as
+    soon as ``alive()`` returns why the process that should make it hold is gone."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        gone = alive() if alive is not None else None
+        if gone is not None:
+            raise WaitTimeout(f"{what}: never happened, {gone}")
+        if time.monotonic() > deadline:
+            raise WaitTimeout(f"{what}: not within {timeout:.0f} s")
+        time.sleep(interval)
+
+
+def recorded_episodes(run_dir: Path) -> int:
+    """How many episode rows the run's episodes.csv holds (0 before it exists)."""
+    path = Path(run_dir) / "episodes.csv"
+    if not path.exists():
+        return 0
+    with path.open() as file:
+        return sum(1 for line in file.read().splitlines()[1:] if line.strip())
+
+
+def wait_for_episode(run_dir: Path, episode: int, timeout: float,
+                     alive: Callable[[], str | None] | None = None) -> None:
+    """Wait until the run in ``run_dir`` has reported ``episode`` in its episodes.csv (the row
+    is written just before that episode's checkpoint): the deterministic point to kill it."""
+    wait_until(lambda: recorded_episodes(run_dir) >= episode, timeout,
+               f"the run in {run_dir} reporting episode {episode} in episodes.csv",
+               alive=alive)
+
+
+def popen_alive(process) -> Callable[[], str | None]:
+    """For :func:`wait_until`: why a ``subprocess.Popen`` is gone, None while it runs."""
+    return lambda: (None if process.poll() is None
+                    else f"the process exited with code {process.returncode}")
+
+
+def read_from_child(fd: int, pid: int, size: int, timeout: float, what: str) -> bytes:
+    """What the forked child ``pid`` writes to the pipe ``fd`` (its write end closed in this
+    process): fails naming ``what`` when the child exits without writing (end of file) or
+    writes nothing within ``timeout`` seconds, and then kills the child rather than hang."""
+    ready, _, _ = select.select([fd], [], [], timeout)
+    data = os.read(fd, size) if ready else None
+    if data:
+        return data
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    _, status = os.waitpid(pid, 0)
+    if data is None:
+        raise WaitTimeout(f"{what}: the forked child (pid {pid}) wrote nothing within "
+                          f"{timeout:.0f} s (killed)")
+    raise WaitTimeout(f"{what}: the forked child (pid {pid}) exited without it "
+                      f"(wait status {status})")
+
+
+def make_checkpoint(**fields):
+    """A :class:`~temporal_torchrl.runs.Checkpoint` with ``fields`` and empty or zero values
+    for the rest (for tests of the run's files, which do not read the modules' states)."""
+    from temporal_torchrl.runs import Checkpoint
+
+    defaults = {"episode": 0, "env_steps": 0, "inserted": 0, "updates": 0, "successes": [],
+                "last_metrics": {}, "sac_loss": {}, "sac_optimizer": {}, "reward": {},
+                "trainer": {}, "relay": {}, "goal_image": None, "buffer_capacity": 0,
+                "expert_rows": 0, "preloaded": 0, "rng": {}}
+    return Checkpoint(**(defaults | fields))

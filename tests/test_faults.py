@@ -24,8 +24,8 @@ import torch
 from helpers import RECIPES, config
 from helpers import episode_csv_rows as episode_rows
 
-import temporal_torchrl.runs.directory as run_module
-from temporal_torchrl.runs import RunDirectory, RunLockedError, UnreadableRunFile
+import temporal_torchrl.runs.durable as durable
+from temporal_torchrl.runs import RunDirectory, RunLockedError, UnreadableRunFile, layout
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -37,7 +37,7 @@ KILL_SEED = 21
 def slow_writes(marker: Path, seconds: float) -> None:
     """Make every run-directory write pause half-way (the first half flushed), noting in
     ``marker`` the file being written: a kill then leaves it half-written."""
-    write_synced = run_module.write_synced
+    write_synced = durable.write_synced
 
     def slow(path, write):
         def in_two_halves(file):
@@ -53,7 +53,7 @@ def slow_writes(marker: Path, seconds: float) -> None:
         write_synced(path, in_two_halves)
         marker.write_text("")
 
-    run_module.write_synced = slow
+    durable.write_synced = slow  # every run-directory write goes through it
 
 
 def fork_run(cfg, marker: Path, log: Path) -> int:
@@ -100,7 +100,7 @@ def test_sigkill_at_random_points_then_resume_gives_the_uninterrupted_episodes(t
     rng = random.Random(KILL_SEED)
 
     def checkpointed() -> int:
-        return run.load_checkpoint()["episode"] if run.has_checkpoint() else 0
+        return run.load_checkpoint().episode if run.has_checkpoint() else 0
 
     def life(wait) -> None:
         resume = ["resume=true"] if run.has_checkpoint() else ["overwrite=true"]
@@ -119,12 +119,12 @@ def test_sigkill_at_random_points_then_resume_gives_the_uninterrupted_episodes(t
         time.sleep(rng.uniform(0.0, 0.6))
 
     # Mid-checkpoint: the new checkpoint is half on disk, the old one intact.
-    life(lambda: wait_for(lambda: writing(run_module.CHECKPOINT + ".tmp")))
-    half = run.path / (run_module.CHECKPOINT + ".tmp")
+    life(lambda: wait_for(lambda: writing(layout.CHECKPOINT + ".tmp")))
+    half = run.path / (layout.CHECKPOINT + ".tmp")
     with pytest.raises(Exception):  # noqa: B017 (what torch raises on a cut zip varies)
         torch.load(half, weights_only=True)
     assert torch.load(run.checkpoint_path, weights_only=True)["episode"] >= 1
-    life(lambda: wait_for(lambda: writing(f"{run_module.REPLAY_DIR}/")))  # mid-replay-episode
+    life(lambda: wait_for(lambda: writing(f"{layout.REPLAY_DIR}/")))  # mid-replay-episode
     life(lambda: time.sleep(rng.uniform(0.0, 0.5)))  # while it starts
     for _ in range(4):
         life(an_episode_more_then_random)
@@ -137,8 +137,8 @@ def test_sigkill_at_random_points_then_resume_gives_the_uninterrupted_episodes(t
     assert resumed["env_steps"] == reference["env_steps"] == EPISODES * 20
     final, expected = run.load_checkpoint(), RunDirectory(
         tmp_path / "reference" / "run").load_checkpoint()
-    for key, value in expected["sac_loss"].items():
-        torch.testing.assert_close(final["sac_loss"][key], value, msg=key)
+    for key, value in expected.sac_loss.items():
+        torch.testing.assert_close(final.sac_loss[key], value, msg=key)
     assert sorted(path.name for path in (run.path / "replay").iterdir()) == [
         f"{index:06d}.pt" for index in range(EPISODES)]
     assert "Traceback" not in log.read_text()  # every life died by the kill, none by an error
@@ -157,7 +157,7 @@ def test_a_truncated_checkpoint_falls_back_to_the_previous_one(tmp_path, capsys)
         file.truncate(5000)
     capsys.readouterr()
     state = run.resume_state()
-    assert (state["episode"], state["inserted"]) == (2, 2)
+    assert (state.episode, state.inserted) == (2, 2)
     assert [row["episode"] for row in run.episode_rows()] == ["1", "2"]
     assert sorted(path.name for path in (run.path / "replay").iterdir()) == [
         "000000.pt", "000001.pt"]
@@ -171,7 +171,7 @@ def test_a_truncated_checkpoint_falls_back_to_the_previous_one(tmp_path, capsys)
     assert episode_rows(run.path) == episode_rows(tmp_path / "reference" / "run")
     # The cut checkpoint never became the fallback: both checkpoints read, one episode apart.
     assert torch.load(run.previous_checkpoint_path, weights_only=True)["episode"] == 4
-    assert run.load_checkpoint()["episode"] == 5
+    assert run.load_checkpoint().episode == 5
 
 
 def test_no_readable_checkpoint_is_a_clear_error(tmp_path):

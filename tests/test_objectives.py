@@ -29,14 +29,15 @@ def states(embeddings, previous=None, initial=None) -> TensorDict:
 
 def first_coordinate_loss(**kwargs) -> PositionalRankingLoss:
     """A loss whose reward is the first embedding coordinate, to check the arithmetic by hand."""
-    reward = TemporalReward(D, torch.ones(D), -torch.ones(D), positional="furl")
+    reward = TemporalReward(D, torch.ones(D), -torch.ones(D), positional="furl",
+                            directional=None)
     loss = PositionalRankingLoss(reward, torch.zeros(D), **kwargs)
     loss.positional_reward = lambda batch: batch["embedding"][:, 0]
     return loss
 
 
 def test_neg_neg_ranking_by_hand():
-    loss = first_coordinate_loss()
+    loss = first_coordinate_loss(stage=1)
     # rewards 0.1, 0.5, 0.0; distances to s_g = 0: 0.1, 0.5, 0.25
     negative = states([[0.1, 0.0], [0.5, 0.0], [0.0, 0.25]])
     out = loss(TensorDict({"negative": negative}, [3]))
@@ -44,13 +45,13 @@ def test_neg_neg_ranking_by_hand():
     # (3 over 2): relu(0.5 - 0.0 + 0.1) = 0.6; (1 over 3) only 0.15 closer: ignored.
     assert out["loss_positional"].item() == pytest.approx((0.5 + 0.6) / 3)
     assert int(out["stage"]) == 1
-    wide = first_coordinate_loss(l2_margin=0.35)
+    wide = first_coordinate_loss(stage=1, l2_margin=0.35)
     assert wide(TensorDict({"negative": negative}, [3]))["loss_positional"].item() == \
         pytest.approx(0.5 / 3)
 
 
 def test_stage_two_pos_neg_and_pos_pos_by_hand():
-    loss = first_coordinate_loss(delta=0.1)
+    loss = first_coordinate_loss(stage=2, delta=0.1)
     batch = TensorDict({
         "negative": states([[0.3, 0.0], [0.0, 0.0]]),
         "positive": states([[0.35, 0.0], [1.0, 0.0]]),
@@ -69,7 +70,7 @@ def test_stage_two_pos_neg_and_pos_pos_by_hand():
 def test_positional_loss_trains_only_positional_heads():
     torch.manual_seed(0)
     reward = TemporalReward(8, torch.randn(8), torch.randn(8), positional="p2", directional="d3")
-    loss = PositionalRankingLoss(reward, torch.randn(8))
+    loss = PositionalRankingLoss(reward, torch.randn(8), stage=1)
     heads = {id(p) for p in reward.positional_heads.parameters()}
     assert {id(p) for p in loss.parameters()} == heads
     optimizer = torch.optim.Adam(loss.parameters(), lr=1e-2)
@@ -91,7 +92,7 @@ def test_directional_loss_matches_thesis_terms(variant):
     reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional=None,
                             directional=variant, lambda_=80.0)
     goal = torch.randn(dim)
-    loss = DirectionalLoss(reward, goal)
+    loss = DirectionalLoss(reward, goal, stage=1)
     negative = TensorDict({key: torch.randn(5, dim) for key in
                            ("embedding", "initial_embedding", "previous_embedding")}, [5])
     positive = TensorDict({key: torch.randn(5, dim) for key in
@@ -113,6 +114,7 @@ def test_directional_loss_matches_thesis_terms(variant):
     p_t, p_tk, p_0 = positive["embedding"], positive["previous_embedding"], \
         positive["initial_embedding"]
     expected_positive = r(p_tk, p_t, p_0, p_t).mean() - r(p_t, p_tk, p_0).mean()
+    loss.stage = 2
     out = loss(TensorDict({"negative": negative, "positive": positive}, [5]))
     assert out["loss_positive"].item() == pytest.approx(expected_positive.item(), abs=1e-6)
     assert out["loss_directional"].item() == pytest.approx(
@@ -142,7 +144,7 @@ def test_joining_the_finetuning_groups_copies_nothing():
     consecutive groups are views of it; any other join is torch.cat's, gradients included."""
     from helpers import make_episode
 
-    from temporal_torchrl.objectives.finetuning import _joined
+    from temporal_torchrl.objectives.finetuning.base import joined as _joined
 
     buffer = EpisodeReplayBuffer(capacity=300, history=2)
     buffer.extend(episode_rows(make_episode(0, 20)))
@@ -170,8 +172,8 @@ def test_directional_release_option_scores_contrast_at_plain_position():
     reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional=None,
                             directional="d4")
     goal = torch.randn(dim)
-    thesis = DirectionalLoss(reward, goal)
-    release = DirectionalLoss(reward, goal, same_position=False)
+    thesis = DirectionalLoss(reward, goal, stage=1)
+    release = DirectionalLoss(reward, goal, stage=1, same_position=False)
     negative = TensorDict({key: torch.randn(5, dim) for key in
                            ("embedding", "initial_embedding", "previous_embedding")}, [5])
     s_t = negative["embedding"]
@@ -195,12 +197,13 @@ def test_stage_switch_follows_the_first_positive_episode():
     buffer = EpisodeReplayBuffer(capacity=300, history=2)
     reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional="furl",
                             directional="d3")
-    positional = PositionalRankingLoss(reward, torch.randn(4))
-    directional = DirectionalLoss(reward, torch.randn(4))
+    positional = PositionalRankingLoss(reward, torch.randn(4), stage=1)
+    directional = DirectionalLoss(reward, torch.randn(4), stage=1)
     buffer.extend(episode_rows(make_episode(0, 20)))
     batch = buffer.finetuning.sample(16)
     assert int(positional(batch)["stage"]) == 1 and int(directional(batch)["stage"]) == 1
     buffer.extend(episode_rows(make_episode(1, 20, successes=(15,))))
+    positional.stage = directional.stage = 2 if buffer.has_positives else 1
     batch = buffer.finetuning.sample(16)
     out = positional(batch)
     assert int(out["stage"]) == 2 and {"loss_pos_neg", "loss_pos_pos"} <= set(out.keys())
@@ -208,11 +211,12 @@ def test_stage_switch_follows_the_first_positive_episode():
 
 
 def test_losses_need_heads():
-    reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional="liv")
+    reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional="liv",
+                            directional=None)
     with pytest.raises(ValueError, match="positional"):
-        PositionalRankingLoss(reward, torch.zeros(4))
+        PositionalRankingLoss(reward, torch.zeros(4), stage=1)
     with pytest.raises(ValueError, match="directional"):
-        DirectionalLoss(reward, torch.zeros(4))
+        DirectionalLoss(reward, torch.zeros(4), stage=1)
 
 
 # --- beyond the thesis: d_sequence (6.3) and d_certainty (6.4) ----------------------------------
@@ -231,7 +235,7 @@ def test_directional_loss_of_a_window_reward_by_hand():
     reward = TemporalReward(dim, torch.randn(dim, generator=gen), torch.randn(dim, generator=gen),
                             positional=None, directional="d_sequence", window_length=length)
     goal = torch.randn(dim, generator=gen)
-    loss = DirectionalLoss(reward, goal)
+    loss = DirectionalLoss(reward, goal, stage=2)
     negative, positive = (window_states(gen, 5, dim, length) for _ in range(2))
     common = {"g": reward.goal_embedding, "b": reward.baseline_embedding}
     heads = reward.directional_heads
@@ -277,7 +281,7 @@ def test_certainty_loss_by_hand():
     torch.manual_seed(6)
     reward = TemporalReward(3, torch.randn(3), torch.randn(3), positional=None,
                             directional="d_certainty")
-    loss = CertaintyLoss(reward, goal)
+    loss = CertaintyLoss(reward, goal, stage=1)
     q, far = np.exp(-10.0), np.exp(-20.0)
     t_positive, t_goal = (1 - 2 * q) / (2 + 2 * q), (2 - 2 * q) / (3 + 2 * q)
     t_opposite = (2 * far - 2 * q) / (1 + 2 * far + 2 * q)
@@ -293,6 +297,7 @@ def test_certainty_loss_by_hand():
     stage1 = loss(TensorDict({"negative": negative}, [2]))
     # Stage 1 has negatives only: the observed ones get (-1 + ...)/(1 + 1) from their twin.
     assert stage1["target_negative"].item() == pytest.approx(-1 / 2, abs=1e-6)
+    loss.stage = 2
     out = loss(TensorDict({"negative": negative, "positive": positive}, [2]))
     assert out["target_positive"].item() == pytest.approx(t_positive, abs=1e-6)
     assert out["target_negative"].item() == pytest.approx(-t_positive, abs=1e-6)
@@ -314,7 +319,7 @@ def test_certainty_loss_trains_graded_rewards():
     torch.manual_seed(7)
     reward = TemporalReward(3, torch.randn(3), torch.randn(3), positional=None,
                             directional="d_certainty")
-    loss = CertaintyLoss(reward, goal)
+    loss = CertaintyLoss(reward, goal, stage=2)
     optimizer = torch.optim.Adam(loss.parameters(), lr=3e-3)
     batch = TensorDict({"negative": negative, "positive": positive}, [2])
     for _ in range(300):
@@ -336,13 +341,14 @@ def test_finetuning_losses_follow_the_registered_objective():
     for (positional, directional), expected in pairs.items():
         reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional=positional,
                                 directional=directional)
-        losses = finetuning_losses(reward, torch.randn(4), delta=0.2, same_position=False)
+        losses = finetuning_losses(reward, torch.randn(4), stage=1, delta=0.2,
+                                   same_position=False)
         assert [type(loss) for loss in losses] == expected
     assert losses == [] and finetuning_losses(
-        TemporalReward(4, torch.randn(4), torch.randn(4)), torch.randn(4))[0].delta == 0.1
+        TemporalReward(4, torch.randn(4), torch.randn(4)), torch.randn(4), stage=1)[0].delta == 0.1
     windowed = TemporalReward(4, torch.randn(4), torch.randn(4), directional="d_sequence")
     with pytest.raises(ValueError, match="reads a window"):
-        CertaintyLoss(windowed, torch.randn(4))
+        CertaintyLoss(windowed, torch.randn(4), stage=1)
 
 
 def test_directional_losses_refresh_the_certainty_references():
@@ -351,7 +357,8 @@ def test_directional_losses_refresh_the_certainty_references():
     negative, positive, goal = certainty_batch()
     reward = TemporalReward(3, torch.randn(3), torch.randn(3), positional=None, directional="d3",
                             certainty_scaling=True)
-    DirectionalLoss(reward, goal)(TensorDict({"negative": negative, "positive": positive}, [2]))
+    DirectionalLoss(reward, goal, stage=2)(TensorDict({"negative": negative, "positive": positive},
+                                                      [2]))
     memory = reward.certainty
     assert memory.labels.tolist() == [-1.0, -1.0, 1.0, 1.0]
     torch.testing.assert_close(memory.directions, torch.eye(3)[[2, 2, 1, 1]])

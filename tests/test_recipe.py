@@ -62,7 +62,7 @@ def test_stage_two_preloads_positive_experts(tmp_path):
     assert [row["stage"] for row in episode_rows(run_dir)] == ["2", "2"]
     assert len(list((run_dir / "replay").iterdir())) == 4  # 2 experts + 2 episodes
     state = RunDirectory(run_dir).load_checkpoint()
-    assert state["inserted"] == 4 and state["episode"] == 2
+    assert state.inserted == 4 and state.episode == 2
 
 
 @pytest.mark.parametrize(("steps_after_success", "length"), [("5", None), ("null", 500)])
@@ -78,7 +78,7 @@ def test_sac_baseline_preloads_experts_without_an_encoder(tmp_path):
                  "train.episodes=1", "env.max_episode_steps=20")
     assert (cfg.reward.positional, cfg.reward.directional) == ("none", "none")
     assert sac_temporal.train(cfg)["episodes"] == 1
-    assert RunDirectory(tmp_path / "run").load_checkpoint()["inserted"] == 2
+    assert RunDirectory(tmp_path / "run").load_checkpoint().inserted == 2
 
 
 def test_save_positives_writes_each_successful_episode_whole(tmp_path, monkeypatch):
@@ -122,8 +122,8 @@ def test_positives_from_another_run_are_preloaded(tmp_path):
         assert len(stored) == 501 and (given == stored).all()
     # s_g from the stored rows is the state goal_image_embedding takes from the expert episode
     # (rounded to the rows' float16)
-    expected = RunDirectory(tmp_path / "experts" / "run").load_checkpoint()["goal_image"]
-    torch.testing.assert_close(run.load_checkpoint()["goal_image"], expected.half().float())
+    expected = RunDirectory(tmp_path / "experts" / "run").load_checkpoint().goal_image
+    torch.testing.assert_close(run.load_checkpoint().goal_image, expected.half().float())
     # SAC without a VLM reward takes the observations only
     sac = config(tmp_path / "sac", "preset=sac", "protocol=stage2", "train.preload_positives=1",
                  "train.episodes=1", "env.max_episode_steps=20", f"train.positives_from={source}")
@@ -199,10 +199,10 @@ def test_beyond_thesis_rewards_train_and_resume_exactly(tmp_path, overrides):
     assert resumed["successes"] == straight["successes"]
     first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint()
                      for name in ("a", "b"))
-    assert first["reward"].keys() == second["reward"].keys()
-    for key, value in first["reward"].items():
-        torch.testing.assert_close(second["reward"][key], value, msg=key)
-    for saved, loaded in zip(first["trainer"]["optimizers"], second["trainer"]["optimizers"],
+    assert first.reward.keys() == second.reward.keys()
+    for key, value in first.reward.items():
+        torch.testing.assert_close(second.reward[key], value, msg=key)
+    for saved, loaded in zip(first.trainer["optimizers"], second.trainer["optimizers"],
                              strict=True):
         for index, moments in saved["state"].items():
             torch.testing.assert_close(loaded["state"][index]["exp_avg"], moments["exp_avg"])
@@ -214,10 +214,10 @@ def test_beyond_thesis_rewards_train_and_resume_exactly(tmp_path, overrides):
         assert metrics["reward/target_positive"] > 0 > metrics["reward/target_negative"]
         assert "reward/loss_directional" not in metrics
     elif "reward.certainty_scaling=true" in overrides:
-        assert first["reward"]["certainty.labels"].abs().sum() == 2 * 16  # a batch of each
+        assert first.reward["certainty.labels"].abs().sum() == 2 * 16  # a batch of each
         assert "xcertainty" in str(default_run_dir(config(tmp_path, *overrides)))
     else:
-        assert first["reward"]["directional_heads.image.position_embedding"].shape == (3, 64)
+        assert first.reward["directional_heads.image.position_embedding"].shape == (3, 64)
 
 
 def test_training_metrics_are_logged_and_summarised(tmp_path):
@@ -291,7 +291,7 @@ def test_kill_and_resume_continues_the_run(tmp_path):
     assert "sac/loss_qvalue" in points[4]
     assert set(points[5]) == {"step", "summary/ttfs", "summary/tt50s"}
     assert summary["episodes"] == 4 and summary["env_steps"] == 80
-    assert RunDirectory(run_dir).load_checkpoint()["inserted"] == 4
+    assert RunDirectory(run_dir).load_checkpoint().inserted == 4
 
 
 def test_a_checkpoint_of_torchrls_sac_loss_is_refused_with_the_way_out(tmp_path):
@@ -307,10 +307,10 @@ def test_a_checkpoint_of_torchrls_sac_loss_is_refused_with_the_way_out(tmp_path)
     env.close()
     qvalue = ValueOperator(MLP(in_features=43, num_cells=[256, 256], out_features=1),
                            in_keys=["action", "observation"])
-    checkpoint["sac_loss"] = SACLoss(actor, qvalue, num_qvalue_nets=2,
+    checkpoint.sac_loss = SACLoss(actor, qvalue, num_qvalue_nets=2,
                                      target_entropy=-2.0).state_dict()
     run.save_checkpoint(checkpoint)
-    with pytest.raises(ValueError, match="git checkout 13c6d64"):
+    with pytest.raises(ValueError, match="Resume the run with the release that wrote it"):
         sac_temporal.train(config(tmp_path, "train.episodes=2", "resume=true"))
 
 
@@ -361,11 +361,11 @@ def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
     run_dir = tmp_path / "run"
     stage2 = ["protocol=stage2", "train.preload_positives=1", "train.random_steps=5"]
     sac_temporal.train(config(tmp_path, *stage2, "train.episodes=2"))
-    expert_rows = RunDirectory(run_dir).load_checkpoint()["expert_rows"]
-    assert RunDirectory(run_dir).load_checkpoint()["buffer_capacity"] == 2 * 21 + expert_rows
+    expert_rows = RunDirectory(run_dir).load_checkpoint().expert_rows
+    assert RunDirectory(run_dir).load_checkpoint().buffer_capacity == 2 * 21 + expert_rows
     summary = sac_temporal.train(config(tmp_path, "resume=true", "train.episodes=5"))
     assert summary["episodes"] == 5
-    assert RunDirectory(run_dir).load_checkpoint()["buffer_capacity"] == 5 * 21 + expert_rows
+    assert RunDirectory(run_dir).load_checkpoint().buffer_capacity == 5 * 21 + expert_rows
     assert f"replay capacity grown from {2 * 21 + expert_rows} to {5 * 21 + expert_rows}" in (
         capsys.readouterr().out)
 
@@ -373,8 +373,8 @@ def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
                    f"replay_buffer.capacity={expert_rows + 2 * 21}")
     sac_temporal.train(small)
     state = RunDirectory(run_dir).load_checkpoint()
-    buffer = factories.make_replay_buffer(small, state["buffer_capacity"], reward=None)
-    for rows in RunDirectory(run_dir).replay_episodes(state["inserted"]):
+    buffer = factories.make_replay_buffer(small, state.buffer_capacity, reward=None)
+    for rows in RunDirectory(run_dir).replay_episodes(state.inserted):
         buffer.extend(rows)
     stored = set().union(*(buffer.sample()["episode"].tolist() for _ in range(60)))
     assert stored == {0, 5, 6}  # the expert and the last two training episodes
@@ -438,7 +438,7 @@ def test_killed_process_resumes(tmp_path):
     assert f"is in use: pid {process.pid} on host" in second.stderr, second.stderr[-2000:]
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
-    done = RunDirectory(run_dir).load_checkpoint()["episode"]
+    done = RunDirectory(run_dir).load_checkpoint().episode
     assert done >= 2
     # The README's command: nothing restated, so the run keeps its own 1,000 episodes (here it
     # is stopped one episode later, as if killed again, without writing a summary).

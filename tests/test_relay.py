@@ -134,7 +134,7 @@ def test_relay_run_resumes_bit_exactly(tmp_path):
     resumed = sac_temporal.train(config(tmp_path / "b", *common, "resume=true"))
     assert resumed["relay_steps"] == straight["relay_steps"] > 0
     assert episode_rows(tmp_path / "a" / "run") == episode_rows(tmp_path / "b" / "run")
-    first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint()["relay"]
+    first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint().relay
                      for name in ("a", "b"))
     for key, value in first["loss"].items():
         torch.testing.assert_close(second["loss"][key], value, msg=key, rtol=0, atol=0)
@@ -148,7 +148,7 @@ def test_stage_two_positives_switch_relay_off_and_leave_the_run_unchanged(tmp_pa
     without = sac_temporal.train(config(tmp_path / "b", *common, "train.relay=false"))
     assert with_relay["relay_steps"] == 0
     assert episode_rows(tmp_path / "a" / "run") == episode_rows(tmp_path / "b" / "run")
-    first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint()["sac_loss"]
+    first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint().sac_loss
                      for name in ("a", "b"))
     for key, value in first.items():
         torch.testing.assert_close(second[key], value, msg=key, rtol=0, atol=0)

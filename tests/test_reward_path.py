@@ -198,8 +198,8 @@ def test_ranking_loss_learns_to_order_expert_states_by_time(tmp_path):
     before, after = [], []
     for seed in range(4):  # untrained heads order the states by chance, in either direction
         torch.manual_seed(seed)
-        reward = TemporalReward(32, texts[0], texts[1], positional="furl")
-        loss = PositionalRankingLoss(reward, torch.zeros(32))
+        reward = TemporalReward(32, texts[0], texts[1], positional="furl", directional=None)
+        loss = PositionalRankingLoss(reward, torch.zeros(32), stage=2)
         optimizer = torch.optim.Adam(loss.parameters(), lr=1e-3)
         with torch.no_grad():
             before.append(spearman(reward.positional_reward(held_out)))

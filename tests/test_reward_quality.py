@@ -7,6 +7,7 @@ from pathlib import Path
 import evaluate_rewards
 import pytest
 import torch
+from helpers import synthetic_episode
 from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 
@@ -22,10 +23,14 @@ from temporal_torchrl.reward_quality import (
     spearman_correlation,
     split_by_episode,
     value_order_correlation,
-    variant_reward,
 )
 from temporal_torchrl.reward_quality import dataset as dataset_module
-from temporal_torchrl.rewards import register_reward, unregister_reward
+from temporal_torchrl.rewards import (
+    TemporalReward,
+    register_reward,
+    single_part,
+    unregister_reward,
+)
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 
@@ -89,24 +94,16 @@ D = 4
 AXIS = torch.tensor([1.0, 0.0, 0.0, 0.0])
 
 
-def synthetic_episode(progress: torch.Tensor, success_from: int | None) -> TensorDict:
-    """An embedded episode whose states s_0 .. s_T sit at ``progress`` along AXIS.
-
-    ``success_from``: the first step t whose ("next", "success") is True (None: never).
-    """
+def progress_episode(progress: torch.Tensor, successes=()) -> TensorDict:
+    """An embedded episode whose states s_0 .. s_T sit at ``progress`` along AXIS, successful
+    after the transitions ``successes`` (their ("next", "success") is True)."""
     steps = progress.numel() - 1
     offsets = 0.01 * torch.randn(steps + 1, D)
     offsets[:, 0] = 0
     states = progress.unsqueeze(-1) * AXIS + offsets + torch.tensor([0.0, 1.0, 0.0, 0.0])
-    success = torch.zeros(steps, 1, dtype=torch.bool)
-    if success_from is not None:
-        success[success_from:] = True
-    return TensorDict({
-        "observation": torch.zeros(steps, 39), "embedding": states[:-1],
-        "action": torch.zeros(steps, 4), "success": torch.zeros(steps, 1, dtype=torch.bool),
-        "next": {"observation": torch.zeros(steps, 39), "embedding": states[1:],
-                 "success": success, "terminated": torch.zeros(steps, 1, dtype=torch.bool)},
-    }, [steps])
+    next_success = torch.zeros(steps, dtype=torch.bool)
+    next_success[list(successes)] = True
+    return synthetic_episode(states, next_success, actions=torch.zeros(steps, 4))
 
 
 def progress(heads, s, **unused):
@@ -143,18 +140,16 @@ def hand_made_rewards():
 def held_out_episodes():
     # Successful episodes rise to success at step 30, then fall back (after the success, which
     # scoring must not read); failed ones stay below every successful state.
-    successful = [synthetic_episode(torch.cat([torch.linspace(0.1, 1.0, 31),
-                                               torch.linspace(0.9, 0.0, 10)]), 29 + shift)
-                  for shift in (0, 1)]
-    for episode, first in zip(successful, (29, 30), strict=True):
-        episode["next", "success"][:] = False
-        episode["next", "success"][first:first + 3] = True
-    failed = [synthetic_episode(-torch.rand(21), None) for _ in range(2)]
+    successful = [progress_episode(torch.cat([torch.linspace(0.1, 1.0, 31),
+                                              torch.linspace(0.9, 0.0, 10)]),
+                                   range(first, first + 3))
+                  for first in (29, 30)]
+    failed = [progress_episode(-torch.rand(21)) for _ in range(2)]
     return successful, failed
 
 
 def score(variant, episodes):
-    reward = variant_reward(variant, D, torch.ones(D), torch.zeros(D), k=3)
+    reward = TemporalReward(D, torch.ones(D), torch.zeros(D), **single_part(variant), k=3)
     return score_reward(reward, *episodes)
 
 
@@ -198,7 +193,7 @@ def test_finetuning_trains_heads_towards_the_labels(held_out_episodes):
     successful, failed = held_out_episodes
     buffer = make_finetuning_buffer([*successful, *failed], history=3, gap=3)
     torch.manual_seed(0)
-    reward = variant_reward("furl", D, torch.ones(D), torch.zeros(D), k=3)
+    reward = TemporalReward(D, torch.ones(D), torch.zeros(D), **single_part("furl"), k=3)
     before = score_reward(reward, successful, failed).auroc
     losses = finetune_reward(reward, buffer, successful[0]["next", "embedding"][29],
                              updates=150, batch_size=32, lr=1e-2)
@@ -283,25 +278,144 @@ def my_reward_module(tmp_path):
     unregister_reward("rq_p5")
 
 
+# The scores of the module docstring of temporal_torchrl.reward_quality.scoring, written out in
+# float64 from the thesis's equations (chapter 4) on the heads' own layers, to check the recipe's
+# rows against: states s_1 .. s_L of a successful episode (L = its first success state), s_1 ..
+# s_T of a failed one, s_(t-k) clamped to s_0, the backward episode's previous frame s_(t+k)
+# clamped to s_L.
+def average_ranks(values: torch.Tensor) -> torch.Tensor:
+    """1-based ranks, ties sharing their mean rank."""
+    values = values.double()
+    return torch.stack([(values < value).sum() + ((values == value).sum() + 1) / 2
+                        for value in values]).double()
+
+
+def rank_correlation_with_time(values: torch.Tensor) -> float:
+    x, t = average_ranks(values), torch.arange(1, len(values) + 1, dtype=torch.float64)
+    x, t = x - x.mean(), t - t.mean()
+    return float((x * t).sum() / (x.norm() * t.norm())) if x.norm() > 0 else 0.0
+
+
+def pair_auroc(positive: torch.Tensor, negative: torch.Tensor) -> float:
+    greater = (positive[:, None] > negative[None, :]).double().mean()
+    return float(greater + 0.5 * (positive[:, None] == negative[None, :]).double().mean())
+
+
+def unit64(x: torch.Tensor) -> torch.Tensor:
+    return x / x.norm(dim=-1, keepdim=True)
+
+
+def csim64(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    return (unit64(x) * unit64(y)).sum(-1)
+
+
+def regularised64(x: torch.Tensor, g: torch.Tensor, b: torch.Tensor, alpha: float):
+    """Eq. 4.5's alpha proj_L x + (1 - alpha) x, L the direction g - b through the origin."""
+    d = g - b
+    return alpha * ((x @ d) / (d @ d)).unsqueeze(-1) * d + (1 - alpha) * x
+
+
+def thesis_reward(variant, heads, s, s_prev, g, b, alpha):
+    """r(s_t) of the thesis equation of ``variant`` (liv, p3, p4: 4.2.2; d5: 4.3.2), float64."""
+    g, b = g.double(), b.double()
+    if heads is not None:
+        def f_image(x):
+            return heads.image(x.float()).double()
+
+        def f_text(x):
+            return heads.text(x.float()).double()
+    if variant == "liv":
+        return csim64(s, g)
+    if variant == "p3":
+        u, v_g, v_b = unit64(f_image(s)), unit64(f_text(g)), unit64(f_text(b))
+        return 1 - 0.5 * (regularised64(u, v_g, v_b, alpha) - v_g).pow(2).sum(-1)
+    if variant == "p4":
+        x = regularised64(s, g, b, alpha)
+        return 1 - 0.5 * (unit64(f_image(x)) - unit64(f_text(g))).pow(2).sum(-1)
+    if variant == "d5":
+        position = unit64(regularised64(s, g, b, alpha))
+        return csim64(f_image(torch.cat([position, unit64(s - s_prev)], -1)), f_text(g - b))
+    raise AssertionError(variant)
+
+
+def expected_scores(variant, heads, successful, failed, g, b, k, alpha) -> dict:
+    def rewards(states, previous):
+        with torch.no_grad():
+            return thesis_reward(variant, heads, states, previous, g, b, alpha)
+
+    def embeddings(episode):
+        return torch.cat([episode["embedding"][:1], episode["next", "embedding"]]).double()
+
+    def back(states, t, steps):
+        return states[(t + steps).clamp(max=len(states) - 1)]
+
+    positive, correlations, forward, backward = [], [], [], []
+    for episode in successful:
+        length = int(episode["next", "success"].reshape(-1).nonzero()[0]) + 1
+        states = embeddings(episode)[:length + 1]
+        t = torch.arange(len(states))
+        values = rewards(states, states[(t - k).clamp(min=0)])
+        positive.append(values[1:])
+        correlations.append(rank_correlation_with_time(values[1:]))
+        forward.append(values[1:length])
+        backward.append(rewards(states, back(states, t, k))[1:length])
+    negative = []
+    for episode in failed:
+        states = embeddings(episode)
+        t = torch.arange(len(states))
+        negative.append(rewards(states, states[(t - k).clamp(min=0)])[1:])
+    scores = {"auroc": pair_auroc(torch.cat(positive), torch.cat(negative))}
+    if variant.startswith("d"):
+        f, r = torch.cat(forward), torch.cat(backward)
+        scores["direction_accuracy"] = float((f > r).double().mean()
+                                             + 0.5 * (f == r).double().mean())
+    else:
+        scores["value_order_correlation"] = float(torch.tensor(correlations).mean())
+    return scores
+
+
 def test_recipe_scores_every_variant_end_to_end(tmp_path, my_reward_module):
+    """Every variant is scored before and after finetuning; the zero-shot liv row and the
+    untrained p3, p4 and d5 rows (with a non-default reward.alpha, which only they read) equal
+    the scores written out from the thesis equations; finetuning moves every row with heads."""
+    alpha = 0.7
     overrides = [f"reward.modules=[{my_reward_module}]",
-                 "reward.positional=[liv,furl,p1,p2,p3,p4,rq_p5]"]
-    result, = evaluate_rewards.evaluate(config(tmp_path, *overrides))
+                 "reward.positional=[liv,furl,p1,p2,p3,p4,rq_p5]", f"reward.alpha={alpha}"]
+    cfg = config(tmp_path, *overrides)
+    result, = evaluate_rewards.evaluate(cfg)
     output = tmp_path / "out" / "button-press-topdown"
     saved = json.loads((output / "results.json").read_text())
     rows = {(row["variant"], row["heads"]): row for row in saved["rows"]}
     variants = ["furl", "p1", "p2", "p3", "p4", "rq_p5", "d1", "d2", "d3", "d4", "d5"]
     assert set(rows) == {("liv", "zero-shot")} | {(variant, heads) for variant in variants
                                                   for heads in ("untrained", "finetuned")}
-    for (variant, _), row in rows.items():
-        assert 0.0 <= row["auroc"] <= 1.0
-        if variant.startswith("d"):
-            assert 0.0 <= row["direction_accuracy"] <= 1.0
-            assert row["value_order_correlation"] is None
-        else:
-            assert -1.0 <= row["value_order_correlation"] <= 1.0
+    # The held-out episodes the recipe scored on, and its goal and baseline texts.
+    encoder = load_encoder("state", dim=16)
+    data = evaluate_rewards.prepare_task(evaluate_rewards.task_config(cfg, cfg.env.task),
+                                         encoder)
+    assert len(data.successful) == 1 and len(data.failed) == 2
+    for variant, heads_state in [("liv", "zero-shot"), ("p3", "untrained"),
+                                 ("p4", "untrained"), ("d5", "untrained")]:
+        torch.manual_seed(cfg.env.seed)  # the recipe's initial heads of every variant
+        part = "directional" if variant.startswith("d") else "positional"
+        fresh = TemporalReward(encoder.dim, data.goal_embedding, data.baseline_embedding,
+                               **{"positional": None, "directional": None, part: variant})
+        heads = getattr(fresh, f"{part}_heads")
+        expected = expected_scores(variant, heads, data.successful, data.failed,
+                                   data.goal_embedding, data.baseline_embedding, cfg.reward.k,
+                                   alpha)
+        row = rows[variant, heads_state]
+        for key, value in expected.items():
+            assert row[key] == pytest.approx(value, abs=1e-6), (variant, key)
+    for variant in variants:
+        untrained, finetuned = rows[variant, "untrained"], rows[variant, "finetuned"]
+        metric = "direction_accuracy" if variant.startswith("d") else "value_order_correlation"
+        assert (finetuned["auroc"], finetuned[metric]) != (untrained["auroc"], untrained[metric]), \
+            variant
+        assert untrained["direction_accuracy" if metric != "direction_accuracy"
+                         else "value_order_correlation"] is None
     assert set(rows["d3", "finetuned"]["final_losses"]) == {"loss_directional"}
-    assert saved["finetuning"]["updates"] == 10
+    assert saved["finetuning"]["updates"] == 10 and saved["finetuning"]["alpha"] == alpha
     assert saved["dataset"]["held_out"]["expert"]["episodes"] == 1
     assert "| rq_p5 | finetuned |" in (output / "results.md").read_text()
     assert sorted(p.stem for p in (output / "figures").glob("*.png")) == sorted(

@@ -8,8 +8,14 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.envs import Compose, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
+from temporal_torchrl.encoders import load_encoder
+from temporal_torchrl.envs import make_env
 from temporal_torchrl.rewards import REWARD_KEYS, TemporalReward
-from temporal_torchrl.transforms import EmbeddingHistoryTransform, TemporalRewardTransform
+from temporal_torchrl.transforms import (
+    EmbeddingHistoryTransform,
+    EmbeddingTransform,
+    TemporalRewardTransform,
+)
 
 D = 6
 
@@ -122,13 +128,6 @@ def test_mismatching_embedding_size_in_the_env_is_explained():
 
 
 def test_real_env_and_state_encoder_pass_check_env_specs():
-    envs = pytest.importorskip("temporal_torchrl.envs")
-    encoders = pytest.importorskip("temporal_torchrl.encoders")
-    try:
-        from temporal_torchrl.transforms import EmbeddingTransform
-        make_env, load_encoder = envs.make_env, encoders.load_encoder
-    except (ImportError, AttributeError) as error:
-        pytest.skip(f"envs/encoders not available yet: {error}")
     encoder = load_encoder("state")
     gen = torch.Generator().manual_seed(0)
     reward = TemporalReward(encoder.dim, torch.randn(encoder.dim, generator=gen),

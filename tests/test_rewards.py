@@ -308,6 +308,48 @@ def test_combined_reward_is_task_plus_rho_times_vlm(embeddings):
     assert all(v.shape == (BATCH, 1) and v.dtype == torch.float32 for v in out.values())
 
 
+@pytest.mark.parametrize("positional", ["p3", "p4"])
+def test_alpha_from_the_config_reaches_p3_p4_and_d5(tmp_path, positional):
+    """reward.alpha of a composed recipe config, through the recipe's own builder
+    (factories.make_reward): at two values of alpha, P3 or P4 and D5 inside the combined reward
+    each equal their thesis equation at that alpha (eq. 4.5 in 4.2.2 and 4.3.2, in numpy), and
+    the two alphas give different rewards (a builder that dropped alpha gives both the
+    default's)."""
+    from helpers import config
+
+    from temporal_torchrl.training import factories
+
+    gen = torch.Generator().manual_seed(4)
+    s, s0, s_prev = (3.0 * torch.randn(BATCH, 16, generator=gen) for _ in range(3))
+    success = torch.tensor([[False], [True], [False], [False]])
+    parts = {}
+    for alpha in (0.15, 0.85):
+        cfg = config(tmp_path, f"reward.positional={positional}", "reward.directional=d5",
+                     f"reward.alpha={alpha}", "reward.rho=0.5", "reward.lambda_=2.0")
+        torch.manual_seed(0)  # the same heads at both alphas
+        reward = factories.make_reward(cfg, factories.make_encoder(cfg))
+        with torch.no_grad():
+            out = reward(s, s0, s_prev, success)
+        g, b = (x.double().numpy() for x in (reward.goal_embedding, reward.baseline_embedding))
+        rows = [(s[i].double().numpy(), s0[i].double().numpy(), s_prev[i].double().numpy())
+                for i in range(BATCH)]
+        expected_p = [reference(positional, reward.positional_heads, *row, g, b, alpha)
+                      for row in rows]
+        expected_d = [reference("d5", reward.directional_heads, *row, g, b, alpha)
+                      for row in rows]
+        np.testing.assert_allclose(out["positional_reward"].squeeze(-1).numpy(), expected_p,
+                                   rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(out["directional_reward"].squeeze(-1).numpy(), expected_d,
+                                   rtol=1e-5, atol=1e-6)
+        expected = success.squeeze(-1).double().numpy() - 1 + 0.5 * (
+            np.array(expected_p) + 2.0 * np.array(expected_d))
+        np.testing.assert_allclose(out["reward"].squeeze(-1).numpy(), expected, rtol=1e-5,
+                                   atol=1e-6)
+        parts[alpha] = (np.array(expected_p), np.array(expected_d))
+    (p_low, d_low), (p_high, d_high) = parts.values()
+    assert np.abs(p_low - p_high).min() > 1e-4 and np.abs(d_low - d_high).min() > 1e-4
+
+
 def test_absent_parts_are_zero_and_have_no_heads(embeddings):
     s, s0, s_prev, _, _, _ = embeddings
     success = torch.zeros(BATCH, 1, dtype=torch.bool)
@@ -315,7 +357,7 @@ def test_absent_parts_are_zero_and_have_no_heads(embeddings):
     assert only_directional.positional_heads is None
     out = only_directional(s, s0, s_prev, success)
     assert torch.equal(out["positional_reward"], torch.zeros(BATCH, 1))
-    zero_shot = _temporal(positional="liv")
+    zero_shot = _temporal(positional="liv", directional=None)
     assert zero_shot.positional_heads is None and zero_shot.directional_heads is None
     out = zero_shot(s, s0, s_prev, success)
     assert torch.equal(out["directional_reward"], torch.zeros(BATCH, 1))
@@ -326,8 +368,8 @@ def test_absent_parts_are_zero_and_have_no_heads(embeddings):
 def test_projection_option_reaches_the_functions(embeddings):
     s, s0, s_prev, _, _, _ = embeddings
     success = torch.zeros(BATCH, 1, dtype=torch.bool)
-    origin = _temporal(positional="p4", projection="origin")
-    line = _temporal(positional="p4", projection="line")
+    origin = _temporal(positional="p4", directional=None, projection="origin")
+    line = _temporal(positional="p4", directional=None, projection="line")
     line.load_state_dict(origin.state_dict())
     assert not torch.allclose(origin(s, s0, s_prev, success)["reward"],
                               line(s, s0, s_prev, success)["reward"])
@@ -406,7 +448,7 @@ def test_zero_shot_registration_has_no_heads(registry, embeddings):
     s, s0, s_prev, _, _, _ = embeddings
     registry("liv2", lambda heads, s, *, g, **unused: -cosine_similarity(s, g),
              kind="positional", image_input=None)
-    reward = _temporal(positional="liv2")
+    reward = _temporal(positional="liv2", directional=None)
     assert reward.positional_heads is None
     out = reward(s, s0, s_prev, torch.zeros(BATCH, 1, dtype=torch.bool))
     torch.testing.assert_close(out["positional_reward"].squeeze(-1),
@@ -448,11 +490,11 @@ def test_register_reward_refuses_bad_input(args, kwargs, message):
     assert "p5" not in IMAGE_INPUTS and "p5" not in POSITIONAL
 
 
-def test_assigning_to_the_dict_directly_says_how_to_register(monkeypatch):
-    monkeypatch.setitem(POSITIONAL, "p5", toy_positional)
-    with pytest.raises(ValueError, match="'p5' is in POSITIONAL but has no head layout.*"
-                                         "register_reward\\('p5'"):
-        _temporal(positional="p5")
+def test_assigning_to_the_dict_directly_says_how_to_register():
+    with pytest.raises(TypeError, match="POSITIONAL is a read-only view.*"
+                                        "register_reward\\('p5'"):
+        POSITIONAL["p5"] = toy_positional
+    assert "p5" not in POSITIONAL
 
 
 def test_builtins_are_registered_with_their_layouts():
@@ -695,7 +737,7 @@ def test_certainty_scaling_multiplies_the_directional_reward_by_the_certainty(em
     torch.testing.assert_close(resumed(s, s0, s_prev, success)["directional_reward"],
                                reward(s, s0, s_prev, success)["directional_reward"])
     with pytest.raises(ValueError, match="set directional too"):
-        _temporal(positional="furl", certainty_scaling=True)
+        _temporal(positional="furl", directional=None, certainty_scaling=True)
 
 
 def test_window_reward_needs_its_window(embeddings):
@@ -733,3 +775,35 @@ def test_objectives_are_registered_and_checked(registry):
         register_reward("p6", toy_positional, kind="positional", image_input="window")
     with pytest.raises(ValueError, match="Unknown reward variant 'd9'"):
         objective_of("d9")
+
+
+def test_the_api_defaults_are_the_recipes():
+    """TemporalReward, make_temporal_reward, the finetuning losses and the trainer, each with its
+    defaults, train the reward that the recipe's config schema describes with its own."""
+    import dataclasses
+    import inspect
+
+    from temporal_torchrl.configs.recipe import RewardConfig
+    from temporal_torchrl.envs import make_temporal_reward
+    from temporal_torchrl.objectives import (
+        HEADS_LEARNING_RATE,
+        DirectionalLoss,
+        PositionalRankingLoss,
+    )
+    from temporal_torchrl.rewards import reward_options
+    from temporal_torchrl.training import RewardHeadTrainer
+
+    def defaults(function, names):
+        parameters = inspect.signature(function).parameters
+        return {name: parameters[name].default for name in names}
+
+    recipe = dataclasses.asdict(RewardConfig())
+    arguments = reward_options({"reward": recipe})
+    assert defaults(TemporalReward, arguments) == arguments
+    assert defaults(make_temporal_reward, ["baseline"]) == {"baseline": recipe["baseline"]}
+    losses = {**defaults(PositionalRankingLoss, ["delta", "l2_margin"]),
+              **defaults(DirectionalLoss, ["same_position"])}
+    assert losses == {name: recipe[name] for name in losses}
+    trainer = defaults(RewardHeadTrainer, ["batch_size", "lr", *losses])
+    assert trainer == {name: recipe[name] for name in trainer}
+    assert HEADS_LEARNING_RATE == recipe["lr"]

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from helpers import make_episode
+from helpers import make_checkpoint, make_episode
 
-import temporal_torchrl.runs.directory as run_module
+import temporal_torchrl.runs.durable as durable
 from temporal_torchrl.data import episode_rows
-from temporal_torchrl.runs import RunDirectory, RunLockedError
+from temporal_torchrl.runs import CHECKPOINT_VERSION, RunDirectory, RunLockedError
 from temporal_torchrl.training import MetricWindow, rng_state, set_rng_state
 
 ROW = {"episode": 1, "env_steps": 20, "success": 0, "return": -20.0, "mean_vlm_reward": 0.5,
@@ -31,7 +31,7 @@ def test_a_new_directory_starts_and_an_existing_run_is_never_replaced_silently(t
         run.check(resume=False, overwrite=False)
     with pytest.raises(FileNotFoundError, match="before its first checkpoint"):
         run.check(resume=True, overwrite=False)
-    run.save_checkpoint({"episode": 1})
+    run.save_checkpoint(make_checkpoint(episode=1))
     with pytest.raises(FileExistsError, match="resume=true to continue it"):
         run.check(resume=False, overwrite=False)
     run.check(resume=True, overwrite=False)
@@ -105,11 +105,12 @@ def test_replay_episodes_and_checkpoint_round_trip(tmp_path):
         assert restored.shape == original.shape
         assert (restored == original).all()
         assert restored["embedding"].dtype == torch.float16
-    state = {"episode": 7, "weights": torch.arange(4.0), "successes": [False, True]}
-    run.save_checkpoint(state)
+    run.save_checkpoint(make_checkpoint(episode=7, successes=[False, True],
+                                        sac_loss={"weights": torch.arange(4.0)}))
     restored = run.load_checkpoint()
-    assert restored["episode"] == 7 and restored["successes"] == [False, True]
-    assert torch.equal(restored["weights"], torch.arange(4.0))
+    assert restored.episode == 7 and restored.successes == [False, True]
+    assert torch.equal(restored.sac_loss["weights"], torch.arange(4.0))
+    assert restored.version == CHECKPOINT_VERSION
     assert not list(run.path.rglob("*.tmp"))
 
 
@@ -117,10 +118,10 @@ def test_rng_state_restores_every_generator(tmp_path):
     run = RunDirectory(tmp_path / "run")
     run.create(config={})
     torch.manual_seed(1), random.seed(2), np.random.seed(3)
-    run.save_checkpoint({"rng": rng_state()})
+    run.save_checkpoint(make_checkpoint(rng=rng_state()))
     expected = (torch.rand(3), random.random(), np.random.rand(2))
     torch.manual_seed(9), random.seed(9), np.random.seed(9)
-    set_rng_state(run.load_checkpoint()["rng"])
+    set_rng_state(run.load_checkpoint().rng)
     assert torch.equal(torch.rand(3), expected[0])
     assert random.random() == expected[1]
     assert np.array_equal(np.random.rand(2), expected[2])
@@ -132,19 +133,19 @@ def test_files_reach_the_disk_before_they_replace_the_old_ones(tmp_path, monkeyp
     file likewise (fsync, rename, directory fsync)."""
     run = RunDirectory(tmp_path / "run")
     run.create(config={})
-    run.save_checkpoint({"episode": 1})
+    run.save_checkpoint(make_checkpoint(episode=1))
     events = []
     real_fsync, real_replace = os.fsync, os.replace
-    monkeypatch.setattr(run_module.os, "fsync", lambda fd: (
+    monkeypatch.setattr(durable.os, "fsync", lambda fd: (
         events.append(("fsync", Path(os.readlink(f"/proc/self/fd/{fd}")).name)), real_fsync(fd)))
-    monkeypatch.setattr(run_module.os, "replace", lambda source, target: (
+    monkeypatch.setattr(durable.os, "replace", lambda source, target: (
         events.append(("replace", Path(source).name, Path(target).name)),
         real_replace(source, target)))
-    run.save_checkpoint({"episode": 2})
+    run.save_checkpoint(make_checkpoint(episode=2))
     assert events == [("fsync", "checkpoint.pt.tmp"),
                       ("replace", "checkpoint.pt", "checkpoint.previous.pt"),
                       ("replace", "checkpoint.pt.tmp", "checkpoint.pt"), ("fsync", "run")]
-    assert run.load_checkpoint()["episode"] == 2
+    assert run.load_checkpoint().episode == 2
     assert torch.load(run.previous_checkpoint_path, weights_only=True)["episode"] == 1
     events.clear()
     run.save_replay_episode(0, episode_rows(make_episode(0, 3)))
@@ -160,12 +161,12 @@ def test_files_reach_the_disk_before_they_replace_the_old_ones(tmp_path, monkeyp
 def test_a_kill_between_the_checkpoint_renames_resumes_from_the_previous_one(tmp_path, capsys):
     run = RunDirectory(tmp_path / "run")
     run.create(config={})
-    run.save_checkpoint({"episode": 1, "inserted": 1})
-    run.save_checkpoint({"episode": 2, "inserted": 2})
+    run.save_checkpoint(make_checkpoint(episode=1, inserted=1))
+    run.save_checkpoint(make_checkpoint(episode=2, inserted=2))
     run.checkpoint_path.rename(run.path / "checkpoint.pt.tmp")  # as left by a kill there
     assert run.has_checkpoint()
     run.check(resume=True, overwrite=False)
-    assert run.load_checkpoint()["episode"] == 1
+    assert run.load_checkpoint().episode == 1
     assert ("checkpoint.pt does not exist; continuing from the previous checkpoint"
             in capsys.readouterr().out)
 

@@ -100,7 +100,7 @@ def test_a_sweep_with_a_cancelled_job_resumes_it_when_launched_again(tmp_path):
         # end, so the launching process would wait for it forever.
         launcher.kill()
         launcher.wait()
-    done = runs[0].load_checkpoint()["episode"]
+    done = runs[0].load_checkpoint().episode
     assert 1 <= done < EPISODES, f"the job was not cancelled mid-run ({done} episodes)"
     assert runs[0].summary() is None
     finished_at = (runs[1].path / "summary.json").stat().st_mtime

@@ -7,6 +7,7 @@ import sac_temporal
 import torch
 from helpers import config
 from helpers import episode_csv_rows as episode_rows
+from torch._dynamo.utils import counters
 
 from temporal_torchrl.encoders import load_encoder
 from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
@@ -14,6 +15,19 @@ from temporal_torchrl.runs import RunDirectory
 from temporal_torchrl.training import factories
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+def forget_compiled_graphs() -> None:
+    """Empty dynamo's caches and counters: a function compiled after this makes new graphs
+    (none are reused from an earlier test), which :func:`compiled_graphs` counts."""
+    torch._dynamo.reset()
+    counters.clear()
+
+
+def compiled_graphs() -> int:
+    """The graphs torch.compile (dynamo) made since :func:`forget_compiled_graphs`: 0 when a
+    function said to be compiled ran eager."""
+    return counters["stats"]["unique_graphs"]
 
 
 def test_batched_env_keeps_each_envs_history_across_resets():
@@ -62,7 +76,7 @@ def test_several_envs_insert_every_episode_and_keep_the_update_ratio(tmp_path, u
     rows = episode_rows(tmp_path / "run")
     assert [int(row["env_steps"]) for row in rows] == [40, 40, 80, 80]
     state = RunDirectory(tmp_path / "run").load_checkpoint()
-    assert state["inserted"] == 4
+    assert state.inserted == 4
     stored = list(RunDirectory(tmp_path / "run").replay_episodes(4))
     assert [len(episode) for episode in stored] == [21] * 4
     # the two envs of one round stored different trajectories
@@ -78,8 +92,8 @@ def test_several_envs_resume_like_the_uninterrupted_run(tmp_path):
     assert episode_rows(tmp_path / "a" / "run") == episode_rows(tmp_path / "b" / "run")
     first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint()
                      for name in ("a", "b"))
-    for key, value in first["sac_loss"].items():
-        torch.testing.assert_close(second["sac_loss"][key], value, msg=key)
+    for key, value in first.sac_loss.items():
+        torch.testing.assert_close(second.sac_loss[key], value, msg=key)
 
 
 @pytest.mark.parametrize("stage", [1, 2])
@@ -104,9 +118,10 @@ def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path, stage):
     batch = buffer.finetuning.sample(16)
     assert trainer.stage == stage
     for loss, compiled in zip(trainer.losses, trainer._forwards, strict=True):
-        assert compiled is not loss
         parameters = list(loss.parameters())
+        forget_compiled_graphs()
         values = [forward(batch)[loss.loss_key] for forward in (loss, compiled)]
+        assert compiled_graphs() > 0, f"{loss.loss_key}: its forward compiled no graph"
         eager_grads, compiled_grads = (torch.autograd.grad(value, parameters, allow_unused=True)
                                        for value in values)
         torch.testing.assert_close(values[1], values[0], rtol=1e-5, atol=1e-6)
@@ -129,9 +144,11 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path):
         actor, critics = factories.make_sac_agent(cfg, env)
         loss, optimizer = factories.make_sac_loss(cfg, actor, critics, 4)
         update = factories.make_sac_update(cfg, loss, optimizer)
-        assert hasattr(update, "_torchdynamo_orig_callable") == compiled
         torch.manual_seed(1)
+        forget_compiled_graphs()
         losses = [update(batch.clone()) for batch in batches]
+        # Compiled: dynamo made graphs of the update (and nothing while it ran eager).
+        assert (compiled_graphs() > 0) == compiled, compiled_graphs()
         results.append((losses, [p.detach().clone() for p in loss.parameters()]))
     env.close()
     (eager_losses, eager_parameters), (compiled_losses, compiled_parameters) = results
@@ -152,10 +169,15 @@ def test_compiled_run_gives_the_eager_runs_episodes(tmp_path):
     def run(name: str, *overrides: str) -> dict:
         return sac_temporal.train(config(tmp_path / name, "reward.directional=d3", *overrides))
 
+    forget_compiled_graphs()
     run("eager", "compile.enabled=false")
+    assert compiled_graphs() == 0
     run("compiled", "compile.enabled=true")
+    assert compiled_graphs() >= 4  # the SAC update, the two head losses, the reward, the policy
     run("switched", "compile.enabled=false", "train.stop_after_episodes=1")
+    forget_compiled_graphs()
     resumed = run("switched", "resume=true", "compile.enabled=true")
+    assert compiled_graphs() > 0  # resumed compiled, not eager
     assert resumed["config"]["compile"]["enabled"] is True
     runs = {}
     for name in ("eager", "compiled", "switched"):

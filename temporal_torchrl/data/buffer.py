@@ -157,9 +157,14 @@ class EpisodeReplayBuffer(ReplayBuffer):
         return self.writer.num_permanent_episodes
 
     @property
+    def stage(self) -> int:
+        """The finetuning's stage (:attr:`FinetuningSampler.stage`)."""
+        return self.finetuning.sampler.stage
+
+    @property
     def has_positives(self) -> bool:
         """Whether a stored episode has positive states (the finetuning's stage 2)."""
-        return self.num_positive_states > 0
+        return self.stage == 2
 
     def memory_bytes(self) -> int:
         """Bytes held by the stored rows and the writer's bookkeeping."""

@@ -142,6 +142,12 @@ class FinetuningSampler(_EpisodeRowSampler):
             self._version, self._candidates = self.writer.version, candidates
         return self._candidates
 
+    @property
+    def stage(self) -> int:
+        """The finetuning's stage (thesis 3.1.3.2): 2 once a stored state is positive, else 1;
+        the one place that says so (the loop, the trainer, the losses and the buffer ask here)."""
+        return 2 if self.candidates()["positive"].numel() > 0 else 1
+
     def groups(self) -> tuple[str, ...]:
         """The groups a batch holds now (a subset of :data:`FINETUNING_GROUPS`, in order)."""
         candidates = self.candidates()

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from typing import Any
 
+from torch import Tensor
+
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.tasks import GENERIC_BASELINE, get_task
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.rewards.defaults import BASELINE
 
 
-def baseline_text(task: str, baseline: str = "generic") -> str:
+def baseline_text(task: str, baseline: str = BASELINE) -> str:
     """``generic`` -> the generic baseline, ``tailored`` -> the task's own, any other text as is.
 
     >>> baseline_text("drawer-open") == GENERIC_BASELINE
@@ -28,26 +31,33 @@ def baseline_text(task: str, baseline: str = "generic") -> str:
     return baseline
 
 
-def make_temporal_reward(task: str, encoder: Encoder, *, positional: str | None = "furl",
-                         directional: str | None = "d3", baseline: str = "generic",
-                         **reward_options: Any) -> TemporalReward:
+def task_text_embeddings(task: str, encoder: Encoder,
+                         baseline: str = BASELINE) -> tuple[Tensor, Tensor]:
+    """g and b of ``task``: its goal prompt (:func:`~temporal_torchrl.envs.get_task`) and its
+    baseline (:func:`baseline_text`), embedded by ``encoder``'s text side, float32 ``[D]`` each
+    on the CPU."""
+    texts = encoder.embed_text([get_task(task).goal_prompt, baseline_text(task, baseline)])
+    return texts[0].float().cpu(), texts[1].float().cpu()
+
+
+def make_temporal_reward(task: str, encoder: Encoder, *, baseline: str = BASELINE,
+                         **reward_arguments: Any) -> TemporalReward:
     """The temporal reward of ``task``, with goal and baseline texts embedded by ``encoder``.
 
     Args:
         task: the task whose goal prompt (:func:`~temporal_torchrl.envs.get_task`) is g.
         encoder: its text side embeds the goal prompt and the baseline.
-        positional, directional: the reward names (None: that part is off).
         baseline: ``generic``, ``tailored`` (the task's own, thesis 4.2.2) or any text.
-        **reward_options: :class:`~temporal_torchrl.rewards.TemporalReward`'s other arguments
-            (``rho``, ``lambda_``, ``k``, ``alpha``, ``projection``, ``window_length``, ...).
+        **reward_arguments: :class:`~temporal_torchrl.rewards.TemporalReward`'s arguments
+            (``positional``, ``directional``, ``rho``, ``lambda_``, ``k``, ...), each defaulting
+            to the training recipe's (:mod:`~temporal_torchrl.rewards.defaults`).
 
     Example:
         >>> from temporal_torchrl.encoders import load_encoder
         >>> encoder = load_encoder("metaworld_small")
-        >>> reward = make_temporal_reward("drawer-open", encoder, rho=1.0, lambda_=4.0)
-        >>> reward.positional, reward.directional
-        ('furl', 'd3')
+        >>> reward = make_temporal_reward("drawer-open", encoder)
+        >>> reward.positional, reward.directional, reward.rho, reward.lambda_
+        ('furl', 'd3', 1.0, 4.0)
     """
-    texts = encoder.embed_text([get_task(task).goal_prompt, baseline_text(task, baseline)])
-    return TemporalReward(encoder.dim, texts[0].float().cpu(), texts[1].float().cpu(),
-                          positional=positional, directional=directional, **reward_options)
+    goal, baseline_embedding = task_text_embeddings(task, encoder, baseline)
+    return TemporalReward(encoder.dim, goal, baseline_embedding, **reward_arguments)

@@ -1,21 +1,25 @@
 """Loss modules: SAC with stacked critics, and the reward-finetuning losses of the positional and
-directional heads."""
+directional heads (:mod:`.finetuning`: one loss a module, on one base)."""
 
 from temporal_torchrl.objectives.finetuning import (
-    HEADS_LEARNING_RATE,
+    STAGES,
     CertaintyLoss,
     DirectionalLoss,
+    FinetuningLoss,
     PositionalRankingLoss,
     finetuning_losses,
     ranking_loss,
     remember_certainty_references,
 )
 from temporal_torchrl.objectives.sac import StackedCriticSACLoss, StackedQValueNetwork
+from temporal_torchrl.rewards.defaults import HEADS_LEARNING_RATE
 
 __all__ = [
     "HEADS_LEARNING_RATE",
+    "STAGES",
     "CertaintyLoss",
     "DirectionalLoss",
+    "FinetuningLoss",
     "PositionalRankingLoss",
     "StackedCriticSACLoss",
     "StackedQValueNetwork",

@@ -104,7 +104,7 @@ def reward_curves(run_dir: str | Path, positive: int | None = None,
     not of its kind.
     """
     reward, checkpoint = load_reward(run_dir)
-    preloaded, inserted = checkpoint["preloaded"], checkpoint["inserted"]
+    preloaded, inserted = checkpoint.preloaded, checkpoint.inserted
     wanted = {"positive": (positive, (EXPERT, SUCCESSFUL)), "negative": (negative, (FAILED,))}
     chosen = []
     for role, (index, kinds) in wanted.items():

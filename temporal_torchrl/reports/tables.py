@@ -226,6 +226,19 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
     return rows
 
 
+def relative_run_path(path: Path, roots: Sequence[Path]) -> str:
+    """``path`` relative to the first of ``roots`` that holds it (POSIX separators), prefixed
+    with that root's name when there are several; ``path``'s last three parts (task,
+    configuration, seed) when none holds it."""
+    resolved = Path(path).resolve()
+    for root in roots:
+        root = Path(root).resolve()
+        if resolved == root or root in resolved.parents:
+            relative = resolved.relative_to(root).as_posix()
+            return f"{root.name}/{relative}" if len(roots) > 1 else relative
+    return Path(*resolved.parts[-3:]).as_posix()
+
+
 def write_csv(path: Path, rows: Sequence[dict[str, str]], columns: Sequence[str]) -> None:
     with path.open("w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=columns)
@@ -233,14 +246,17 @@ def write_csv(path: Path, rows: Sequence[dict[str, str]], columns: Sequence[str]
         writer.writerows(rows)
 
 
-def run_rows(groups: Sequence[RunGroup]) -> list[dict[str, str]]:
-    """One row per run (:data:`RUN_COLUMNS`): its metrics, or why it has none."""
+def run_rows(groups: Sequence[RunGroup], roots: Sequence[Path]) -> list[dict[str, str]]:
+    """One row per run (:data:`RUN_COLUMNS`): its metrics, or why it has none. Its path is
+    written relative to the one of ``roots`` (the directories given to the report) it is in,
+    so that the table holds no machine's paths; with several roots it starts with that root's
+    name."""
     rows = []
     for group in groups:
         for run in group.runs:
             row = {"configuration": group.label, "task": run.task, "seed": str(run.seed),
                    "episodes": str(run.episodes), "finished": str(run.finished).lower(),
-                   "path": str(run.path)}
+                   "path": relative_run_path(run.path, roots)}
             for metric in METRICS:
                 value = run_value(run, metric)
                 row[metric] = (value.describe() if value.value is not None

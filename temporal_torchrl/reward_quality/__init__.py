@@ -35,7 +35,6 @@ from temporal_torchrl.reward_quality.scoring import (
     score_reward,
     state_rewards,
     success_length,
-    variant_reward,
 )
 
 __all__ = [
@@ -60,5 +59,4 @@ __all__ = [
     "state_rewards",
     "success_length",
     "value_order_correlation",
-    "variant_reward",
 ]

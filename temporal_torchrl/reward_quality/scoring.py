@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import torch
 from tensordict import TensorDictBase
@@ -32,31 +31,10 @@ from temporal_torchrl.reward_quality.metrics import (
     direction_accuracy,
     value_order_correlation,
 )
-from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, TemporalReward
+from temporal_torchrl.rewards import TemporalReward
 
 POSITIONAL_KIND = "positional"
 DIRECTIONAL_KIND = "directional"
-
-
-def variant_reward(variant: str, embedding_dim: int, goal_embedding: Tensor,
-                   baseline_embedding: Tensor, **options: Any) -> TemporalReward:
-    """A :class:`TemporalReward` with the registered ``variant`` as its only part.
-
-    Positional variants (:data:`~temporal_torchrl.rewards.POSITIONAL`) become the positional
-    part, directional ones the directional part; the heads are freshly initialised (seed torch
-    first for reproducible heads). ``options`` go to :class:`TemporalReward` (``k``, ``alpha``,
-    ``projection``, ``window_length``, ``certainty_bandwidth``, ``certainty_prior``); rho and
-    lambda scale the total reward only and play no part here.
-    """
-    if variant in POSITIONAL:
-        parts = {"positional": variant, "directional": None}
-    elif variant in DIRECTIONAL:
-        parts = {"positional": None, "directional": variant}
-    else:
-        raise ValueError(f"unknown reward variant {variant!r}; expected one of "
-                         f"{', '.join([*POSITIONAL, *DIRECTIONAL])}, or one registered with "
-                         "register_reward() (in the recipe: a module in reward.modules).")
-    return TemporalReward(embedding_dim, goal_embedding, baseline_embedding, **parts, **options)
 
 
 def episode_embeddings(episode: TensorDictBase) -> Tensor:
@@ -72,8 +50,8 @@ def reward_kind(reward: TemporalReward) -> str:
     if (reward.positional is None) == (reward.directional is None):
         raise ValueError(
             f"a scored reward has exactly one part; got positional={reward.positional!r}, "
-            f"directional={reward.directional!r}. Build one TemporalReward per variant, with "
-            "the other part None.")
+            f"directional={reward.directional!r}. Build one TemporalReward per variant "
+            "(reward_from_config(config, g, b, variant=...)).")
     return POSITIONAL_KIND if reward.positional is not None else DIRECTIONAL_KIND
 
 

@@ -1,6 +1,7 @@
 """Positional and directional VLM rewards (thesis chapter 4) and their trainable heads.
 
-Add a reward of your own with :func:`register_reward`.
+Add a reward of your own with :func:`register_reward`; build the reward a config describes with
+:func:`reward_from_config`. Every default is written once, in :mod:`.defaults`.
 """
 
 from temporal_torchrl.rewards.certainty import (
@@ -8,20 +9,25 @@ from temporal_torchrl.rewards.certainty import (
     direction_certainty,
     reference_scales,
 )
-from temporal_torchrl.rewards.directional import DIRECTIONAL, straight_window, window_tokens
+from temporal_torchrl.rewards.config import reward_from_config, reward_options
+from temporal_torchrl.rewards.directional import straight_window, window_tokens
 from temporal_torchrl.rewards.heads import RewardHeads, SequenceEncoder, heads_input_dims
 from temporal_torchrl.rewards.positional import (
-    POSITIONAL,
     PROJECTIONS,
     cosine_similarity,
     goal_baseline_regularise,
 )
 from temporal_torchrl.rewards.registry import (
+    DIRECTIONAL,
     IMAGE_INPUTS,
     OBJECTIVES,
+    POSITIONAL,
+    REWARDS,
+    RegisteredReward,
     RewardFunction,
     objective_of,
     register_reward,
+    single_part,
     unregister_reward,
 )
 from temporal_torchrl.rewards.temporal import REWARD_KEYS, TemporalReward
@@ -32,8 +38,10 @@ __all__ = [
     "OBJECTIVES",
     "POSITIONAL",
     "PROJECTIONS",
+    "REWARDS",
     "REWARD_KEYS",
     "CertaintyMemory",
+    "RegisteredReward",
     "RewardFunction",
     "RewardHeads",
     "SequenceEncoder",
@@ -45,6 +53,9 @@ __all__ = [
     "objective_of",
     "reference_scales",
     "register_reward",
+    "reward_from_config",
+    "reward_options",
+    "single_part",
     "straight_window",
     "unregister_reward",
     "window_tokens",

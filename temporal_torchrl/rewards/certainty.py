@@ -35,19 +35,11 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
+from temporal_torchrl.rewards.defaults import CERTAINTY_BANDWIDTH, CERTAINTY_PRIOR
 from temporal_torchrl.rewards.directional import _concatenated
 from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.positional import EPS, _required, unit
 from temporal_torchrl.rewards.registry import register_reward
-
-#: Defaults of the certainty estimate: kernel bandwidth beta (in units of the references' median
-#: distances) and the pseudo-count c of "unsure". Calibrated on the reward-quality benchmark's
-#: six tasks with the shipped encoder (docs/results/beyond_thesis/certainty_calibration.md):
-#: beta = 0.2 lets the position kernel alone decide, a random direction at an expert's position
-#: gets a target of +0.08; beta = 0.1, the widest of the grid that keeps it at 0.00, is the default.
-CERTAINTY_BANDWIDTH = 0.1
-CERTAINTY_PRIOR = 1.0
-
 
 #: Pairs (i, i + s mod R) for this many shifts s estimate the median distances (see
 #: :func:`reference_scales`).
@@ -61,9 +53,8 @@ def reference_scales(positions: Tensor, directions: Tensor) -> Tensor:
 
     The ordered distinct pairs are the pairs (i, i + s mod R) over the shifts s = 1 .. R - 1;
     with more than :data:`SCALE_SHIFTS` + 1 references, :data:`SCALE_SHIFTS` shifts spread
-    evenly over that range are used, a systematic sample of all pairs (8,192 of 261,632 for a
-    finetuning batch of 512 references: about 2 ms instead of 24 on a CPU core for the full
-    distance matrix and its median).
+    evenly over that range are used, a systematic sample of all pairs (8,192 of the 261,632 of a
+    finetuning batch of 512 references) that spares the full distance matrix and its median.
     """
     count = positions.shape[0]
     if count < 2:

@@ -28,6 +28,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from temporal_torchrl.rewards.defaults import ALPHA, PROJECTION
 from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.positional import (
     _required,
@@ -36,7 +37,6 @@ from temporal_torchrl.rewards.positional import (
     goal_baseline_regularise,
     unit,
 )
-from temporal_torchrl.rewards.registry import DIRECTIONAL as DIRECTIONAL
 from temporal_torchrl.rewards.registry import register_reward
 
 
@@ -97,7 +97,7 @@ def d4(heads: RewardHeads, s: Tensor, *, s0: Tensor | None = None, s_prev: Tenso
 
 
 def d5(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, g: Tensor, b: Tensor,
-       alpha: float = 0.4, position: Tensor | None = None, projection: str = "origin",
+       alpha: float = ALPHA, position: Tensor | None = None, projection: str = PROJECTION,
        **unused) -> Tensor:
     """D5, goal-baseline-regularised position and direction (thesis 4.3.2)::
 
@@ -193,7 +193,7 @@ def d_sequence(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None,
     return cosine_similarity(image, heads.text(g - b))
 
 
-# The built-in directional rewards, into DIRECTIONAL; d3-d5 read position ⊕ direction (2·D),
+# The built-in directional rewards; d3-d5 read position ⊕ direction (2·D),
 # d_sequence a window of K embeddings (K - 1 tokens of 2·D).
 register_reward("d1", d1, kind="directional", image_input="embedding")
 register_reward("d2", d2, kind="directional", image_input="embedding")

@@ -13,7 +13,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from temporal_torchrl.modules import ReLU, relu
-from temporal_torchrl.rewards.registry import IMAGE_INPUTS, image_input_of
+from temporal_torchrl.rewards.registry import IMAGE_INPUTS, registered
 
 
 def _mlp(in_dim: int, hidden_dim: int, out_dim: int) -> nn.Sequential:
@@ -191,7 +191,7 @@ def heads_input_dims(variant: str, embedding_dim: int) -> tuple[int, int]:
     """
     if not isinstance(embedding_dim, int) or embedding_dim < 1:
         raise ValueError(f"embedding_dim={embedding_dim!r}; expected a positive integer.")
-    layout = image_input_of(variant)  # Raises for an unknown or unregistered name.
+    layout = registered(variant).image_input  # Raises for an unknown name.
     if layout is None:
         headed = [name for name, value in IMAGE_INPUTS.items() if value is not None]
         raise ValueError(f"Reward variant {variant!r} is zero-shot (registered with "

@@ -35,9 +35,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from temporal_torchrl.rewards.defaults import ALPHA, PROJECTION
 from temporal_torchrl.rewards.heads import RewardHeads
-from temporal_torchrl.rewards.registry import POSITIONAL as POSITIONAL
-from temporal_torchrl.rewards.registry import RewardFunction as RewardFunction
 from temporal_torchrl.rewards.registry import register_reward
 
 #: Floor on vector norms in every normalisation (zero vectors map to zero, not NaN).
@@ -62,7 +61,7 @@ def cosine_similarity(x: Tensor, y: Tensor) -> Tensor:
 
 
 def goal_baseline_regularise(x: Tensor, goal: Tensor, baseline: Tensor, alpha: float,
-                             projection: str = "origin") -> Tensor:
+                             projection: str = PROJECTION) -> Tensor:
     """alpha proj_L x + (1 - alpha) x (thesis 3.1.2, eq. 4.5), broadcast over ``x [..., D]``.
 
     ``projection="origin"``: L is the direction ``goal - baseline`` through the origin, on the
@@ -126,8 +125,8 @@ def p2(heads: RewardHeads, s: Tensor, *, s0: Tensor | None = None, g: Tensor,
     return cosine_similarity(image, heads.text(g) - heads.text(b))
 
 
-def p3(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.4,
-       projection: str = "origin", **unused) -> Tensor:
+def p3(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = ALPHA,
+       projection: str = PROJECTION, **unused) -> Tensor:
     """P3, goal-baseline regularisation after the heads (thesis 4.2.2)::
 
         r_P3(s_t) = 1 - 1/2 ||alpha proj_L(f^P_{W_I}(s_t)) + (1 - alpha) f^P_{W_I}(s_t)
@@ -145,8 +144,8 @@ def p3(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.
     return _half_squared_distance_reward(regularised, goal)
 
 
-def p4(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.4,
-       projection: str = "origin", **unused) -> Tensor:
+def p4(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = ALPHA,
+       projection: str = PROJECTION, **unused) -> Tensor:
     """P4, goal-baseline regularisation before the heads (thesis 4.2.2):
     r_P4(s_t) = 1 - 1/2 ||f^P_{W_I}(alpha proj_L s_t + (1 - alpha) s_t) - f^P_{W_L}(g)||^2,
     L = g - b.
@@ -160,7 +159,7 @@ def p4(heads: RewardHeads, s: Tensor, *, g: Tensor, b: Tensor, alpha: float = 0.
     return _half_squared_distance_reward(unit(heads.image(regularised)), unit(heads.text(g)))
 
 
-# The built-in positional rewards, into POSITIONAL (liv is zero-shot: no heads).
+# The built-in positional rewards (liv is zero-shot: no heads).
 register_reward("liv", liv, kind="positional", image_input=None)
 register_reward("furl", furl, kind="positional", image_input="embedding")
 register_reward("p1", p1, kind="positional", image_input="embedding")

@@ -1,25 +1,32 @@
-"""The reward registries: :data:`POSITIONAL`, :data:`DIRECTIONAL` and each reward's head layout.
+"""The reward registry: one dict, :data:`REWARDS`, of every registered reward.
 
 Every reward, built-in or a researcher's own, is added with :func:`register_reward`, which records
-the function under its name, what its image head reads (:data:`IMAGE_INPUTS`) and the finetuning
-objective that trains its heads (:data:`OBJECTIVES`).
+under its name a :class:`RegisteredReward`: the function, its kind (positional or directional),
+what its image head reads and the finetuning objective that trains its heads.
+:data:`POSITIONAL`, :data:`DIRECTIONAL`, :data:`IMAGE_INPUTS` and :data:`OBJECTIVES` are read-only
+views of that one dict, so they cannot fall out of step with it.
 :func:`~temporal_torchrl.rewards.heads.heads_input_dims` and
-:class:`~temporal_torchrl.rewards.TemporalReward` build the heads from that record, so a
+:class:`~temporal_torchrl.rewards.TemporalReward` build the heads from the record, so a
 registered name works everywhere a built-in does. The built-ins register themselves at the end of
-:mod:`~temporal_torchrl.rewards.positional` and :mod:`~temporal_torchrl.rewards.directional`.
+:mod:`~temporal_torchrl.rewards.positional`, :mod:`~temporal_torchrl.rewards.directional` and
+:mod:`~temporal_torchrl.rewards.certainty`.
 """
 
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 from torch import Tensor
+
+from temporal_torchrl.rewards.defaults import ALPHA, PROJECTION
 
 #: A reward function; see :func:`register_reward` for the signature it must follow.
 RewardFunction = Callable[..., Tensor]
 
-#: Reward kinds, the registries they go into.
+#: Reward kinds: a value of the position (positional) or of the direction (directional).
 KINDS = ("positional", "directional")
 #: What an image head can read: one embedding ``[D]``, the concatenation of a position part and a
 #: direction part ``[2 D]``, a sequence of such concatenations built from the window of the last
@@ -31,23 +38,78 @@ IMAGE_LAYOUTS = ("embedding", "concatenated", "window", None)
 #: the thesis, section 6.4 proposal); see :mod:`temporal_torchrl.objectives`.
 OBJECTIVES_BY_KIND = {"positional": ("ranking",), "directional": ("directional", "certainty")}
 
-#: Positional reward functions r_P by name.
-POSITIONAL: dict[str, RewardFunction] = {}
-#: Directional reward functions r_D by name.
-DIRECTIONAL: dict[str, RewardFunction] = {}
+# Every keyword a reward function is called with (TemporalReward and the finetuning losses).
+_CALL_KEYWORDS = {"s0": None, "s_prev": None, "g": None, "b": None, "alpha": ALPHA,
+                  "projection": PROJECTION, "position": None, "window": None}
+_SIGNATURE = (f"fn(heads, s, *, g, b, s0=None, s_prev=None, alpha={ALPHA}, position=None, "
+              f"projection={PROJECTION!r}, window=None, **unused)")
+
+
+@dataclass(frozen=True)
+class RegisteredReward:
+    """One entry of :data:`REWARDS` (see :func:`register_reward` for each field's values).
+
+    Attributes:
+        function: the reward function.
+        kind: ``"positional"`` or ``"directional"`` (:data:`KINDS`).
+        image_input: what the image head reads (:data:`IMAGE_LAYOUTS`).
+        objective: the finetuning objective of its heads (:data:`OBJECTIVES_BY_KIND`).
+    """
+
+    function: RewardFunction
+    kind: str
+    image_input: str | None
+    objective: str
+
+
+#: Every registered reward by name, in the order of registration.
+REWARDS: dict[str, RegisteredReward] = {}
+
+
+class RegistryView(Mapping[str, Any]):
+    """A read-only view of one field of :data:`REWARDS`, for the rewards of one kind or all.
+
+    Args:
+        name: the view's name, for its messages.
+        field: the :class:`RegisteredReward` attribute it maps each name to.
+        kind: only rewards of this kind (:data:`KINDS`); None: every reward.
+    """
+
+    def __init__(self, name: str, field: str, kind: str | None = None) -> None:
+        self._name, self._field, self._kind = name, field, kind
+
+    def __getitem__(self, name: str) -> Any:
+        reward = REWARDS.get(name)
+        if reward is None or self._kind not in (None, reward.kind):
+            raise KeyError(name)
+        return getattr(reward, self._field)
+
+    def __iter__(self) -> Iterator[str]:
+        return (name for name, reward in REWARDS.items() if self._kind in (None, reward.kind))
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+    def __setitem__(self, name: str, value: Any) -> None:
+        kind = self._kind or "positional"
+        raise TypeError(f"{self._name} is a read-only view of the reward registry; add {name!r} "
+                        f"with register_reward({name!r}, fn, kind={kind!r}, "
+                        "image_input='embedding' | 'concatenated' | 'window' | None).")
+
+    def __repr__(self) -> str:
+        return f"{self._name}({dict(self)!r})"
+
+
+#: Positional reward functions r_P by name (a view of :data:`REWARDS`).
+POSITIONAL = RegistryView("POSITIONAL", "function", "positional")
+#: Directional reward functions r_D by name (a view of :data:`REWARDS`).
+DIRECTIONAL = RegistryView("DIRECTIONAL", "function", "directional")
 #: The image-head layout of every registered reward, by name (one of
 #: :data:`~temporal_torchrl.rewards.registry.IMAGE_LAYOUTS`).
-IMAGE_INPUTS: dict[str, str | None] = {}
+IMAGE_INPUTS = RegistryView("IMAGE_INPUTS", "image_input")
 #: The finetuning objective of every registered reward, by name (see
 #: :data:`~temporal_torchrl.rewards.registry.OBJECTIVES_BY_KIND`).
-OBJECTIVES: dict[str, str] = {}
-
-_REGISTRIES = {"positional": POSITIONAL, "directional": DIRECTIONAL}
-# Every keyword a reward function is called with (TemporalReward and the finetuning losses).
-_CALL_KEYWORDS = {"s0": None, "s_prev": None, "g": None, "b": None, "alpha": 0.4,
-                  "projection": "origin", "position": None, "window": None}
-_SIGNATURE = ("fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=0.4, position=None, "
-              "projection='origin', window=None, **unused)")
+OBJECTIVES = RegistryView("OBJECTIVES", "objective")
 
 
 def register_reward(name: str, function: RewardFunction, *, kind: str,
@@ -55,17 +117,20 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
                     overwrite: bool = False) -> None:
     """Add a reward function under ``name`` so :class:`TemporalReward` can use it.
 
-    The function goes into :data:`POSITIONAL` (``kind="positional"``) or :data:`DIRECTIONAL`
-    (``kind="directional"``), ``image_input`` is recorded so
+    The reward goes into :data:`REWARDS` (and so into the :data:`POSITIONAL` or
+    :data:`DIRECTIONAL` view, by ``kind``), with ``image_input``, so
     :func:`~temporal_torchrl.rewards.heads.heads_input_dims` and :class:`TemporalReward` build
-    heads of the right sizes, and ``objective`` so the training recipe (and
+    heads of the right sizes, and ``objective``, so the training recipe (and
     :func:`~temporal_torchrl.objectives.finetuning_losses`) trains the heads with the right loss.
     A name is unique across both kinds.
 
     The function must have the signature of the built-ins::
 
-        fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=0.4, position=None,
-           projection="origin", window=None, **unused) -> Tensor
+        fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=ALPHA, position=None,
+           projection=PROJECTION, window=None, **unused) -> Tensor
+
+    (:data:`~temporal_torchrl.rewards.defaults.ALPHA`,
+    :data:`~temporal_torchrl.rewards.defaults.PROJECTION`: callers always pass both.)
 
     - ``heads``: the :class:`~temporal_torchrl.rewards.RewardHeads` (``heads.image``,
       ``heads.text``), or None when ``image_input=None``.
@@ -114,7 +179,8 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         ...     return cosine_similarity(image, heads.text(g))
         >>> register_reward("toy", toy, kind="positional")
         >>> D = 8
-        >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="toy", rho=1.0)
+        >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="toy",
+        ...                         directional=None)
         >>> heads = reward.positional_heads
         >>> heads.image_dim, heads.text_dim
         (8, 8)
@@ -155,16 +221,13 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         raise ValueError(f"register_reward({name!r}): function={function!r} is not callable; "
                          f"expected a function {_SIGNATURE}.")
     _check_signature(name, function)
-    if name in IMAGE_INPUTS and not overwrite:
-        registered = "positional" if name in POSITIONAL else "directional"
-        raise ValueError(f"register_reward: a {registered} reward {name!r} is already "
+    if name in REWARDS and not overwrite:
+        raise ValueError(f"register_reward: a {REWARDS[name].kind} reward {name!r} is already "
                          "registered; choose another name or pass overwrite=True to replace "
                          "it.")
-    if name in IMAGE_INPUTS:
-        unregister_reward(name)
-    _REGISTRIES[kind][name] = function
-    IMAGE_INPUTS[name] = image_input
-    OBJECTIVES[name] = objective
+    # An overwritten name moves to the end, as a new registration would stand.
+    REWARDS.pop(name, None)
+    REWARDS[name] = RegisteredReward(function, kind, image_input, objective)
 
 
 def unregister_reward(name: str) -> None:
@@ -173,32 +236,35 @@ def unregister_reward(name: str) -> None:
     Raises:
         ValueError: if no reward of that name is registered.
     """
-    if name not in IMAGE_INPUTS:
+    if name not in REWARDS:
         raise ValueError(f"unregister_reward: no reward {name!r} is registered; registered: "
-                         f"{', '.join(IMAGE_INPUTS)}.")
-    POSITIONAL.pop(name, None)
-    DIRECTIONAL.pop(name, None)
-    del IMAGE_INPUTS[name]
-    del OBJECTIVES[name]
+                         f"{', '.join(REWARDS)}.")
+    del REWARDS[name]
 
 
-def image_input_of(name: str) -> str | None:
-    """The image-head layout (one of :data:`IMAGE_LAYOUTS`) of the reward registered as ``name``.
+def registered(name: str) -> RegisteredReward:
+    """The :class:`RegisteredReward` of ``name``.
 
     Raises:
-        ValueError: for an unknown name, or one put into :data:`POSITIONAL` or
-            :data:`DIRECTIONAL` directly instead of through :func:`register_reward`.
+        ValueError: for a name no reward is registered under.
     """
-    if name in IMAGE_INPUTS:
-        return IMAGE_INPUTS[name]
-    if name in POSITIONAL or name in DIRECTIONAL:
-        kind = "positional" if name in POSITIONAL else "directional"
-        raise ValueError(
-            f"Reward {name!r} is in {kind.upper()} but has no head layout; add it with "
-            f"register_reward({name!r}, fn, kind={kind!r}, image_input='embedding' | "
-            "'concatenated' | None) instead of assigning to the dict.")
-    raise ValueError(f"Unknown reward variant {name!r}; expected one of "
-                     f"{', '.join(IMAGE_INPUTS)}, or register it with register_reward().")
+    if name not in REWARDS:
+        raise ValueError(f"Unknown reward variant {name!r}; expected one of "
+                         f"{', '.join(REWARDS)}, or register it with register_reward().")
+    return REWARDS[name]
+
+
+def single_part(name: str) -> dict[str, str | None]:
+    """:class:`~temporal_torchrl.rewards.TemporalReward`'s ``positional`` and ``directional``
+    arguments with the reward registered as ``name`` as the only part, in the slot of its kind.
+
+    >>> single_part("d3")
+    {'positional': None, 'directional': 'd3'}
+
+    Raises:
+        ValueError: for an unknown name.
+    """
+    return {"positional": None, "directional": None, registered(name).kind: name}
 
 
 def objective_of(name: str) -> str:
@@ -206,10 +272,9 @@ def objective_of(name: str) -> str:
     ``name``.
 
     Raises:
-        ValueError: for an unknown name, or one not added through :func:`register_reward`.
+        ValueError: for an unknown name.
     """
-    image_input_of(name)  # Raises for an unknown or unregistered name.
-    return OBJECTIVES[name]
+    return registered(name).objective
 
 
 def _check_signature(name: str, function: RewardFunction) -> None:

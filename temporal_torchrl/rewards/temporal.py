@@ -5,18 +5,13 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from temporal_torchrl.rewards.certainty import (
-    CERTAINTY_BANDWIDTH,
-    CERTAINTY_PRIOR,
-    CertaintyMemory,
-)
-from temporal_torchrl.rewards.directional import DIRECTIONAL
+from temporal_torchrl.rewards import defaults
+from temporal_torchrl.rewards.certainty import CertaintyMemory
 from temporal_torchrl.rewards.heads import RewardHeads, heads_input_dims
-from temporal_torchrl.rewards.positional import POSITIONAL, PROJECTIONS
-from temporal_torchrl.rewards.registry import image_input_of
+from temporal_torchrl.rewards.positional import PROJECTIONS
+from temporal_torchrl.rewards.registry import DIRECTIONAL, POSITIONAL, REWARDS, registered
 
 REWARD_KEYS = ("task_reward", "positional_reward", "directional_reward", "vlm_reward", "reward")
-
 
 
 def check_window_length(window_length: int | None, *, optional: bool = False) -> None:
@@ -31,10 +26,14 @@ def check_window_length(window_length: int | None, *, optional: bool = False) ->
         raise ValueError(f"window_length={window_length!r}; expected {expected} (the K "
                          "embeddings s_(t-K+1) .. s_t).")
 
+
 class TemporalReward(nn.Module):
     """Positional and directional VLM rewards added to the sparse task reward (thesis 4.1):
 
     r_t = r^task_t + rho (r^VLM_P(s_t) + lambda r^VLM_D(s_t)),  r^task_t = success_t - 1.
+
+    Every default is the training recipe's (:mod:`~temporal_torchrl.rewards.defaults`): the
+    thesis's best reward, FuRL + D3 at rho 1, lambda 4 (section 5.3.3).
 
     Args:
         embedding_dim: size D of the image and text embeddings.
@@ -44,7 +43,7 @@ class TemporalReward(nn.Module):
             added with :func:`~temporal_torchrl.rewards.register_reward`) or None.
         directional: a key of :data:`DIRECTIONAL` (``"d1"``-``"d5"``, or one added with
             :func:`~temporal_torchrl.rewards.register_reward`) or None.
-        rho: weight of the VLM reward (>= 0; FuRL's default 0.05).
+        rho: weight of the VLM reward (>= 0; FuRL's own is 0.05, section 5.2).
         lambda_: weight of the directional reward relative to the positional one (>= 0).
         k: history offset of s_{t-k} (>= 1). Carried here as configuration: the history transform
             (:class:`~temporal_torchrl.transforms.EmbeddingHistoryTransform`) produces s_{t-k} and
@@ -86,11 +85,15 @@ class TemporalReward(nn.Module):
     """
 
     def __init__(self, embedding_dim: int, goal_embedding: Tensor, baseline_embedding: Tensor,
-                 positional: str | None = "furl", directional: str | None = None,
-                 rho: float = 0.05, lambda_: float = 1.0, k: int = 5, alpha: float = 0.4,
-                 projection: str = "origin", window_length: int = 8,
-                 certainty_bandwidth: float = CERTAINTY_BANDWIDTH,
-                 certainty_prior: float = CERTAINTY_PRIOR, certainty_scaling: bool = False):
+                 positional: str | None = defaults.POSITIONAL_REWARD,
+                 directional: str | None = defaults.DIRECTIONAL_REWARD,
+                 rho: float = defaults.RHO, lambda_: float = defaults.LAMBDA,
+                 k: int = defaults.HISTORY, alpha: float = defaults.ALPHA,
+                 projection: str = defaults.PROJECTION,
+                 window_length: int = defaults.WINDOW_LENGTH,
+                 certainty_bandwidth: float = defaults.CERTAINTY_BANDWIDTH,
+                 certainty_prior: float = defaults.CERTAINTY_PRIOR,
+                 certainty_scaling: bool = False):
         super().__init__()
         if isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) \
                 or embedding_dim < 1:
@@ -132,7 +135,7 @@ class TemporalReward(nn.Module):
         self.alpha = float(alpha)
         self.projection = projection
         # Only directional rewards read a window (register_reward enforces it).
-        reads_window = directional is not None and image_input_of(directional) == "window"
+        reads_window = directional is not None and REWARDS[directional].image_input == "window"
         self.window_length = window_length if reads_window else None
         self.certainty_bandwidth = float(certainty_bandwidth)
         self.certainty_prior = float(certainty_prior)
@@ -146,10 +149,10 @@ class TemporalReward(nn.Module):
 
     def _heads(self, variant: str | None) -> RewardHeads | None:
         """Heads sized by the variant's registered image input; None if absent or zero-shot."""
-        if variant is None or image_input_of(variant) is None:
+        layout = None if variant is None else registered(variant).image_input
+        if layout is None:
             return None
-        sequence_length = (self.window_length - 1 if image_input_of(variant) == "window"
-                           else None)
+        sequence_length = self.window_length - 1 if layout == "window" else None
         return RewardHeads(*heads_input_dims(variant, self.embedding_dim),
                            sequence_length=sequence_length)
 
@@ -197,7 +200,7 @@ class TemporalReward(nn.Module):
         self._check_embedding("embedding", embedding)
         if self.positional is None:
             raise ValueError("This TemporalReward has no positional part (positional=None).")
-        return POSITIONAL[self.positional](
+        return REWARDS[self.positional].function(
             self.positional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha, position=None,
             projection=self.projection, window=window)
@@ -229,7 +232,7 @@ class TemporalReward(nn.Module):
                              "previous_embedding to embedding; pass window=None with it.")
         if not straight_path:
             self._check_window(window)
-        return DIRECTIONAL[variant or self.directional](
+        return REWARDS[variant or self.directional].function(
             self.directional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha,
             position=position, projection=self.projection, window=window)

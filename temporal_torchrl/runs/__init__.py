@@ -7,21 +7,25 @@ config (:mod:`~temporal_torchrl.runs.reward`), and reading it back
 (:mod:`~temporal_torchrl.runs.readers`). The recipe writes runs through this package and the
 reports read them through it."""
 
-from temporal_torchrl.runs.directory import (
-    LOCK,
-    PREVIOUS_CHECKPOINT,
-    RunDirectory,
-    RunLockedError,
+from temporal_torchrl.runs.checkpoint import (
+    CHECKPOINT_VERSION,
+    Checkpoint,
+    CheckpointFiles,
     UnreadableRunFile,
-    write_json,
 )
+from temporal_torchrl.runs.directory import RunDirectory
+from temporal_torchrl.runs.durable import write_json
+from temporal_torchrl.runs.episode_log import EpisodeLog
+from temporal_torchrl.runs.episode_store import EpisodeStore
 from temporal_torchrl.runs.layout import (
     CHECKPOINT,
     CONFIG_FILE,
     EPISODE_COLUMNS,
     EPISODES_FILE,
+    LOCK,
     METRICS_FILE,
     POSITIVES_DIR,
+    PREVIOUS_CHECKPOINT,
     PROTOCOLS,
     REPLAY_DIR,
     STAGE2_POSITIVES,
@@ -29,6 +33,8 @@ from temporal_torchrl.runs.layout import (
     flatten,
     protocol_name,
 )
+from temporal_torchrl.runs.lock import RunLock, RunLockedError
+from temporal_torchrl.runs.metrics_log import MetricsLog
 from temporal_torchrl.runs.naming import default_run_dir, run_directory
 from temporal_torchrl.runs.readers import (
     RUN_KEYS,
@@ -56,8 +62,16 @@ from temporal_torchrl.runs.reward import (
     reward_options,
     uses_vlm_reward,
 )
+from temporal_torchrl.runs.sweep_job import SweepJobFailed, describe_exit, run_sweep_job
 
 __all__ = [
+    "CHECKPOINT_VERSION",
+    "Checkpoint",
+    "CheckpointFiles",
+    "EpisodeLog",
+    "EpisodeStore",
+    "MetricsLog",
+    "RunLock",
     "CHECKPOINT",
     "CONFIG_FILE",
     "DEVICE_KEYS",
@@ -94,6 +108,9 @@ __all__ = [
     "reward_from_config",
     "reward_options",
     "run_directory",
+    "SweepJobFailed",
+    "describe_exit",
+    "run_sweep_job",
     "sweep_job_config",
     "threads_per_job",
     "uses_vlm_reward",

@@ -12,6 +12,17 @@ CONFIG_FILE = "config.json"
 EPISODES_FILE = "episodes.csv"
 SUMMARY_FILE = "summary.json"
 CHECKPOINT = "checkpoint.pt"
+#: The checkpoint before the latest, kept until the new one is complete on disk.
+PREVIOUS_CHECKPOINT = "checkpoint.previous.pt"
+#: Where a resume moves a latest checkpoint it could not read.
+UNREADABLE_CHECKPOINT = "checkpoint.pt.unreadable"
+LOCK = "run.lock"
+#: Who holds the lock (host, pid, since, Slurm job).
+LOCK_HOLDER = "run.lock.json"
+#: Files of the lock itself: they do not make a directory hold a run.
+LOCK_FILES = (LOCK, LOCK_HOLDER)
+#: The folder of the TorchRL CSV logger's files.
+LOGS_DIR = "logs"
 METRICS_FILE = "metrics.jsonl"
 REPLAY_DIR = "replay"
 POSITIVES_DIR = "positives"

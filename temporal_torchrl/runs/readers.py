@@ -7,7 +7,6 @@ summary (a run still running or killed has no summary); :func:`load_reward` and
 
 from __future__ import annotations
 
-import csv
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -17,14 +16,10 @@ from typing import Any
 import torch
 
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.runs.layout import (
-    CHECKPOINT,
-    CONFIG_FILE,
-    EPISODES_FILE,
-    REPLAY_DIR,
-    SUMMARY_FILE,
-    episode_file,
-)
+from temporal_torchrl.runs.checkpoint import Checkpoint
+from temporal_torchrl.runs.directory import RunDirectory
+from temporal_torchrl.runs.episode_log import EpisodeLog
+from temporal_torchrl.runs.layout import CHECKPOINT, CONFIG_FILE, EPISODES_FILE, SUMMARY_FILE
 from temporal_torchrl.runs.reward import reward_from_config
 
 #: Keys that tell the runs of one configuration apart (and put them in different table rows).
@@ -78,24 +73,10 @@ class Run:
 
 
 def read_successes(path: Path) -> tuple[bool, ...]:
-    """The ``success`` column of an ``episodes.csv`` (empty when the file does not exist)."""
-    if not path.exists():
-        return ()
-    with path.open(newline="") as file:
-        reader = csv.DictReader(file)
-        if reader.fieldnames is None:
-            return ()
-        if "success" not in reader.fieldnames or "episode" not in reader.fieldnames:
-            raise ValueError(f"{path} has columns {reader.fieldnames}; expected the recipe's "
-                             "episode, env_steps, success, ... columns.")
-        successes = []
-        for number, row in enumerate(reader, start=1):
-            if row["episode"] != str(number) or row["success"] not in ("0", "1"):
-                raise ValueError(f"{path}: row {number} reads episode={row['episode']!r}, "
-                                 f"success={row['success']!r}; expected episode {number} and "
-                                 "success 0 or 1 (episodes in order, none missing).")
-            successes.append(row["success"] == "1")
-    return tuple(successes)
+    """The ``success`` column of an ``episodes.csv`` (empty when the file does not exist),
+    each row checked by the rules a resume applies
+    (:func:`~temporal_torchrl.runs.episode_log.row_problem`)."""
+    return EpisodeLog(path).successes()
 
 
 def load_run(path: str | Path) -> Run:
@@ -131,34 +112,31 @@ def find_runs(paths: Iterable[str | Path]) -> list[Run]:
     return [load_run(path) for path in sorted(found)]
 
 
-def load_reward(run_dir: str | Path) -> tuple[TemporalReward, dict]:
-    """The run's reward with its saved heads, and its checkpoint (for ``"preloaded"``,
-    ``"inserted"`` and ``"episode"``).
+def load_reward(run_dir: str | Path) -> tuple[TemporalReward, Checkpoint]:
+    """The run's reward with the heads of its latest readable checkpoint (falling back to the
+    previous one as a resume does), and that checkpoint (for its ``preloaded``, ``inserted`` and
+    ``episode``).
 
     Rewards registered by the run's ``reward.modules`` must be imported first.
     """
-    run_dir = Path(run_dir)
-    path = run_dir / CHECKPOINT
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} has no {CHECKPOINT}: the reward heads are saved "
+    run = RunDirectory(run_dir)
+    if not run.has_checkpoint():
+        raise FileNotFoundError(f"{run.path} has no {CHECKPOINT}: the reward heads are saved "
                                 "there after each checkpointed episode.")
-    config = json.loads((run_dir / CONFIG_FILE).read_text())
-    checkpoint = torch.load(path, weights_only=True, map_location="cpu")
-    state = checkpoint["reward"]
+    checkpoint = run.load_checkpoint()
+    state = checkpoint.reward
     if not state:
-        raise ValueError(f"{run_dir} has no VLM reward (reward.positional and "
+        raise ValueError(f"{run.path} has no VLM reward (reward.positional and "
                          "reward.directional are none): there are no r_P, r_D to plot.")
-    reward = reward_from_config(config, state["goal_embedding"], state["baseline_embedding"])
+    reward = reward_from_config(run.config(), state["goal_embedding"], state["baseline_embedding"])
     reward.load_state_dict(state)
     return reward.eval(), checkpoint
 
 
 def load_episode(run_dir: str | Path, index: int) -> dict[str, torch.Tensor]:
     """The stored rows of the run's ``index``-th inserted episode."""
-    path = Path(run_dir) / REPLAY_DIR / episode_file(index)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} does not exist: no episode {index} in the replay.")
-    episode = torch.load(path, weights_only=True)
-    if "embedding" not in episode:
-        raise ValueError(f"{path} stores no embeddings: the run has no VLM reward.")
-    return episode
+    rows = RunDirectory(run_dir).replay.load(index)
+    if "embedding" not in rows.keys():
+        raise ValueError(f"{RunDirectory(run_dir).replay.path(index)} stores no embeddings: the "
+                         "run has no VLM reward.")
+    return rows.to_dict()

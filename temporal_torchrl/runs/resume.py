@@ -13,14 +13,16 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from temporal_torchrl.runs.directory import RunDirectory
-from temporal_torchrl.runs.layout import CONFIG_FILE, flatten
+from temporal_torchrl.runs.layout import CONFIG_FILE, SUMMARY_FILE, flatten
 from temporal_torchrl.runs.naming import run_directory
 from temporal_torchrl.runs.reward import uses_vlm_reward
 
 
-def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
+def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig | None:
     """One job of a ``-m`` sweep: its run directory under the sweep directory, resumed when a
     checkpoint is there (a re-launched sweep continues its runs, finished ones return at once),
+    None (nothing to run) when the directory holds a finished run's raw files without its
+    checkpoint (a study's committed runs copied back into the sweep on a new machine),
     restarted when the job died before its first checkpoint, and torch threads set so that
     parallel jobs share the cores instead of oversubscribing them. A run a live process is
     writing is left as it is: the recipe's ``train`` then stops on its lock (``RunLockedError``)."""
@@ -29,6 +31,9 @@ def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
         cfg.runs_dir = hydra_config.sweep.dir
     run = RunDirectory(run_directory(cfg))
     if not cfg.overwrite and not cfg.resume and run.locked_by() is None:
+        if finished_without_checkpoint(run, cfg.train.episodes):
+            print(f"{run.path}: already complete ({SUMMARY_FILE} without a checkpoint: skipped)")
+            return None
         if run.has_checkpoint():
             cfg.resume = True
         elif run.holds_files():
@@ -37,6 +42,14 @@ def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig:
     if cfg.train.threads is None:
         cfg.train.threads = threads_per_job(hydra_config.launcher)
     return cfg
+
+
+def finished_without_checkpoint(run: RunDirectory, episodes: int) -> bool:
+    """Whether ``run`` holds the summary of a run of at least ``episodes`` episodes but no
+    checkpoint: finished, with only the raw files a study commits."""
+    summary = run.summary()
+    return (summary is not None and not run.has_checkpoint()
+            and summary.get("episodes", 0) >= episodes)
 
 
 def threads_per_job(launcher: DictConfig) -> int | None:

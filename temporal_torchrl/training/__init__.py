@@ -9,6 +9,7 @@ from temporal_torchrl.training.logger import (
     log_metrics,
     reward_statistics,
 )
+from temporal_torchrl.training.start import RunStart, start_run
 from temporal_torchrl.training.state import (
     TrainingProgress,
     TrainingState,
@@ -25,6 +26,7 @@ __all__ = [
     "EpisodeAssembler",
     "MetricWindow",
     "RewardHeadTrainer",
+    "RunStart",
     "RunLogger",
     "TrainingProgress",
     "TrainingState",
@@ -36,4 +38,5 @@ __all__ = [
     "rng_state",
     "run_summary",
     "set_rng_state",
+    "start_run",
 ]

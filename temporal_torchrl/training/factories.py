@@ -35,14 +35,19 @@ from temporal_torchrl.envs import (
     EXPERT_MAX_STEPS,
     collect_successful_experts,
     make_temporal_env,
-    make_temporal_reward,
 )
+from temporal_torchrl.envs.task_reward import task_text_embeddings
 from temporal_torchrl.modules import ReLU
 from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
-from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.runs import RunDirectory, check_positives_source, reward_options
+from temporal_torchrl.rewards import TemporalReward, reward_from_config
+from temporal_torchrl.runs import RunDirectory, check_positives_source
 from temporal_torchrl.training.logger import RunLogger
-from temporal_torchrl.training.relay import RelayExploration, RelayPolicy, RelaySchedule
+from temporal_torchrl.training.relay import (
+    NoRelay,
+    RelayExploration,
+    RelayPolicy,
+    RelaySchedule,
+)
 from temporal_torchrl.training.trainer import RewardHeadTrainer
 
 #: Added to env.seed for the relay agent's initial weights.
@@ -72,8 +77,8 @@ def describe_encoder(cfg: DictConfig, encoder: Encoder | None) -> str:
 def make_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
     """The run's reward on ``train.device``, goal and baseline texts embedded by the encoder's
     text side."""
-    reward = make_temporal_reward(cfg.env.task, encoder, baseline=cfg.reward.baseline,
-                                  **reward_options(cfg))
+    reward = reward_from_config(
+        cfg, *task_text_embeddings(cfg.env.task, encoder, cfg.reward.baseline))
     if cfg.compile.enabled:  # the relabelling (and the env's reward) runs compiled
         reward.compile(mode=cfg.compile.mode)
     return reward.to(resolve_device(cfg.train.device))
@@ -148,22 +153,26 @@ def saved_positives(cfg: DictConfig, count: int) -> list[TensorDict]:
     return list(source.positive_episodes(count))
 
 
-def describe_relay(cfg: DictConfig, relay: RelayExploration | None) -> str:
+def describe_relay(cfg: DictConfig, relay: RelayExploration | NoRelay) -> str:
     """One line: whether relay exploration runs, and until when."""
-    if relay is None:
-        return ("off (train.relay=false)" if not cfg.train.relay
-                else "off (no finetuned reward heads to relay for)")
+    if isinstance(relay, NoRelay):
+        return f"off ({relay.reason})"
     if not relay.schedule.active:
         return f"off (the positives already reach train.relay_threshold={relay.schedule.threshold})"
     return (f"on until {relay.schedule.threshold:,} positive states (periods "
             f"{list(cfg.train.relay_periods)}, noise {cfg.train.relay_noise})")
 
 
-def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor,
-               positive_states: int) -> RelayExploration:
+def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor, positive_states: int,
+               finetune: bool) -> RelayExploration | NoRelay:
     """FuRL's relay exploration (``train.relay*``): a second SAC agent on the sparse task reward,
     built from its own seed so the run's other random streams are those of a run without relay;
-    off from the start when ``positive_states`` already meet ``train.relay_threshold``."""
+    off from the start when ``positive_states`` already meet ``train.relay_threshold``.
+    :class:`NoRelay` with ``train.relay=false`` or without finetuned heads (``finetune``)."""
+    if not cfg.train.relay:
+        return NoRelay(actor, "train.relay=false")
+    if not finetune:
+        return NoRelay(actor, "no finetuned reward heads to relay for")
     schedule = RelaySchedule(cfg.env.num_envs, list(cfg.train.relay_periods),
                              cfg.train.relay_threshold, seed=cfg.env.seed,
                              active=positive_states < cfg.train.relay_threshold)

@@ -183,6 +183,11 @@ class RelayExploration:
     def schedule(self) -> RelaySchedule:
         return self.policy.schedule
 
+    @property
+    def total_steps(self) -> int:
+        """Env steps the relay agent has acted in."""
+        return self.schedule.total_relay_steps
+
     @staticmethod
     def task_reward_batch(batch: TensorDictBase) -> TensorDictBase:
         """``batch`` (a shallow copy) with the sparse task reward instead of the relabelled one;
@@ -190,6 +195,22 @@ class RelayExploration:
         relay_batch = batch.clone(False)
         relay_batch["next", "reward"] = batch["next", "success"].float() - 1.0
         return relay_batch
+
+    def batch_to_learn(self, batch: TensorDictBase) -> TensorDictBase | None:
+        """What the relay agent learns from ``batch`` (:meth:`task_reward_batch`), None once the
+        relay has ended."""
+        return self.task_reward_batch(batch) if self.schedule.active else None
+
+    def episode_metrics(self, env: int, length: int) -> dict[str, float]:
+        """The logged share of env ``env``'s ended episode (``length`` steps) the relay acted."""
+        return {"train/relay_fraction": self.schedule.episode_relay_steps(env) / length}
+
+    def advance(self, ended: Sequence[int], acted: bool) -> None:
+        """One vector step taken (:meth:`RelaySchedule.advance`)."""
+        self.schedule.advance(ended, acted=acted)
+
+    def end_if_enough(self, positive_states: int) -> None:
+        self.schedule.end_if_enough(positive_states)
 
     def state_dict(self) -> dict[str, Any]:
         return {"schedule": self.schedule.state_dict(), "loss": self.loss.state_dict(),
@@ -199,3 +220,32 @@ class RelayExploration:
         self.schedule.load_state_dict(state["schedule"])
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
+
+
+class NoRelay:
+    """A run without relay exploration, with :class:`RelayExploration`'s interface: the actor
+    collects alone, nothing is learned or logged, nothing is saved. ``reason`` says why."""
+
+    total_steps = 0
+
+    def __init__(self, actor: TensorDictModuleBase, reason: str) -> None:
+        self.policy = actor
+        self.reason = reason
+
+    def batch_to_learn(self, batch: TensorDictBase) -> None:
+        return None
+
+    def episode_metrics(self, env: int, length: int) -> dict[str, float]:
+        return {}
+
+    def advance(self, ended: Sequence[int], acted: bool) -> None:
+        pass
+
+    def end_if_enough(self, positive_states: int) -> None:
+        pass
+
+    def state_dict(self) -> dict[str, Any]:
+        return {}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        pass

@@ -1,6 +1,7 @@
 """Everything a training run resumes from, as one object: :class:`TrainingState`.
 
-A checkpoint (``RunDirectory.save_checkpoint``) is :meth:`TrainingState.state_dict`: the SAC loss
+A checkpoint (:class:`~temporal_torchrl.runs.Checkpoint`, its fields typed and versioned) is
+:meth:`TrainingState.checkpoint`: the SAC loss
 (actor, critics, targets, temperature) and its optimizer, the reward (heads, certainty
 references), the reward-head trainer (optimizers, stage), the relay agent and its schedule, the
 goal image s_g, the counters (:class:`TrainingProgress`, update credits included), the replay's
@@ -18,6 +19,8 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
+
+from temporal_torchrl.runs import Checkpoint
 
 
 @dataclass
@@ -79,51 +82,50 @@ class TrainingState:
         self.buffer_capacity, self.expert_rows, self.preloaded = (buffer_capacity, expert_rows,
                                                                   preloaded)
 
-    def state_dict(self) -> dict[str, Any]:
-        """The checkpoint: plain tensors and values that ``torch.load(weights_only=True)``
-        reads back."""
+    def checkpoint(self) -> Checkpoint:
+        """The run's checkpoint, of plain tensors and values (``torch.load(weights_only=True)``
+        reads it back)."""
         progress = self.progress
-        return {
-            "sac_loss": self.sac_loss.state_dict(),
-            "sac_optimizer": self.sac_optimizer.state_dict(),
-            "reward": self.reward.state_dict() if self.reward is not None else {},
-            "trainer": self.trainer.state_dict() if self.trainer is not None else {},
-            "relay": self.relay.state_dict() if self.relay is not None else {},
-            "goal_image": self.goal_image if self.trainer is not None else None,
-            "episode": progress.episode, "env_steps": progress.env_steps,
-            "inserted": progress.inserted, "updates": progress.updates,
-            "successes": list(progress.successes), "last_metrics": progress.last_metrics,
-            "credits": {"sac": progress.credits.sac, "reward": progress.credits.reward},
-            "buffer_capacity": self.buffer_capacity, "expert_rows": self.expert_rows,
-            "preloaded": self.preloaded, "rng": rng_state()}
+        return Checkpoint(
+            sac_loss=self.sac_loss.state_dict(), sac_optimizer=self.sac_optimizer.state_dict(),
+            reward=self.reward.state_dict() if self.reward is not None else {},
+            trainer=self.trainer.state_dict() if self.trainer is not None else {},
+            relay=self.relay.state_dict() if self.relay is not None else {},
+            goal_image=self.goal_image if self.trainer is not None else None,
+            episode=progress.episode, env_steps=progress.env_steps, inserted=progress.inserted,
+            updates=progress.updates, successes=list(progress.successes),
+            last_metrics=progress.last_metrics,
+            credits={"sac": progress.credits.sac, "reward": progress.credits.reward},
+            buffer_capacity=self.buffer_capacity, expert_rows=self.expert_rows,
+            preloaded=self.preloaded, rng=rng_state())
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
+    def load_checkpoint(self, checkpoint: Checkpoint) -> None:
         """Restore the modules and the counters (the random generators: :func:`set_rng_state`
-        with ``state["rng"]``, once the build's own draws are done)."""
-        if "qvalue_network_params.module.0.weight" in state["sac_loss"]:
+        with ``checkpoint.rng``, once the build's own draws are done)."""
+        if "qvalue_network_params.module.0.weight" in checkpoint.sac_loss:
             raise ValueError(
                 "this checkpoint's SAC agent was saved by TorchRL's SACLoss (temporal-torchrl "
-                "before the stacked critics, commit 13c6d64 and earlier), whose critics this "
-                "version cannot load. Resume the run with that version (git checkout 13c6d64), "
-                "or start it afresh in a new output_dir.")
-        self.sac_loss.load_state_dict(state["sac_loss"])
-        self.sac_optimizer.load_state_dict(state["sac_optimizer"])
+                "before its stacked critics, see the CHANGELOG), whose critics this version "
+                "cannot load. Resume the run with the release that wrote it, or start it afresh "
+                "in a new output_dir.")
+        self.sac_loss.load_state_dict(checkpoint.sac_loss)
+        self.sac_optimizer.load_state_dict(checkpoint.sac_optimizer)
         for name in ("reward", "trainer", "relay"):
             module = getattr(self, name)
             if module is not None:
-                module.load_state_dict(state[name])
-        restored = progress_from(state)
+                module.load_state_dict(getattr(checkpoint, name))
+        restored = progress_from(checkpoint)
         for name in vars(restored):  # in place: the loop holds this progress object
             setattr(self.progress, name, getattr(restored, name))
 
 
-def progress_from(state: dict[str, Any]) -> TrainingProgress:
-    """The counters of a checkpoint (:meth:`TrainingState.state_dict`)."""
-    credits = state.get("credits", {})
+def progress_from(checkpoint: Checkpoint) -> TrainingProgress:
+    """The counters of a checkpoint (:meth:`TrainingState.checkpoint`)."""
+    credits = checkpoint.credits
     return TrainingProgress(
-        episode=state["episode"], env_steps=state["env_steps"], inserted=state["inserted"],
-        updates=state["updates"], successes=list(state["successes"]),
-        last_metrics=dict(state["last_metrics"]),
+        episode=checkpoint.episode, env_steps=checkpoint.env_steps,
+        inserted=checkpoint.inserted, updates=checkpoint.updates,
+        successes=list(checkpoint.successes), last_metrics=dict(checkpoint.last_metrics),
         credits=UpdateCredits(sac=credits.get("sac", 0.0), reward=credits.get("reward", 0.0)))
 
 

@@ -12,6 +12,7 @@ from torchrl.objectives import LossModule
 
 from temporal_torchrl.objectives import HEADS_LEARNING_RATE, finetuning_losses
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.rewards.defaults import DELTA, L2_MARGIN, SAME_POSITION
 
 
 class RewardHeadTrainer:
@@ -42,7 +43,8 @@ class RewardHeadTrainer:
         >>> from tensordict import TensorDict
         >>> from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
         >>> D, T = 8, 20
-        >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl")
+        >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
+        ...                         directional=None)
         >>> buffer = EpisodeReplayBuffer(100, history=2)
         >>> episode = TensorDict({"embedding": torch.randn(T, D), "action": torch.rand(T, 4),
         ...     "next": {"embedding": torch.randn(T, D),
@@ -56,8 +58,9 @@ class RewardHeadTrainer:
 
     def __init__(self, reward: TemporalReward, goal_image_embedding: Tensor,
                  replay: ReplayBuffer, *, batch_size: int = 256,
-                 lr: float = HEADS_LEARNING_RATE, delta: float = 0.1, l2_margin: float = 0.2,
-                 same_position: bool = True, compile: bool = False,
+                 lr: float = HEADS_LEARNING_RATE, delta: float = DELTA,
+                 l2_margin: float = L2_MARGIN, same_position: bool = SAME_POSITION,
+                 compile: bool = False,
                  compile_mode: str | None = None) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size={batch_size!r}; expected an integer >= 1.")
@@ -66,8 +69,8 @@ class RewardHeadTrainer:
         self.batch_size = batch_size
         device = reward.goal_embedding.device
         self.losses = [loss.to(device) for loss in finetuning_losses(
-            reward, torch.as_tensor(goal_image_embedding).to(device), delta=delta,
-            l2_margin=l2_margin, same_position=same_position)]
+            reward, torch.as_tensor(goal_image_embedding).to(device), stage=self.stage,
+            delta=delta, l2_margin=l2_margin, same_position=same_position)]
         self._forwards = [torch.compile(loss, mode=compile_mode) if compile else loss
                           for loss in self.losses]
         # Fused Adam: the same update as the per-tensor loop, about 7x faster for these MLPs on a
@@ -77,12 +80,15 @@ class RewardHeadTrainer:
 
     @property
     def stage(self) -> int:
-        """2 once the replay holds positive states (thesis 3.1.3.2), else 1."""
-        return 2 if "positive" in self.replay.sampler.groups() else 1
+        """The finetuning's stage, as the replay's sampler says (thesis 3.1.3.2)."""
+        return self.replay.sampler.stage
 
     def update(self) -> TensorDict:
         """One finetuning batch, one step per loss; returns the loss terms and the ``stage``."""
         batch = self.replay.sample(self.batch_size)
+        stage = self.stage
+        for loss in self.losses:
+            loss.stage = stage
         outputs = [forward(batch) for forward in self._forwards]
         trained = [_trainable(loss, out) for loss, out in zip(self.losses, outputs, strict=True)
                    if int(out["summed_parts"])]  # a loss with nothing to score in this batch waits
@@ -97,7 +103,7 @@ class RewardHeadTrainer:
         metrics = TensorDict({}, [])
         for out in outputs:
             metrics.update(out.exclude("summed_parts").detach())
-        metrics["stage"] = torch.tensor(2.0 if "positive" in batch.keys() else 1.0)
+        metrics["stage"] = torch.tensor(float(stage))
         return metrics
 
     def state_dict(self) -> dict[str, Any]:

@@ -46,9 +46,8 @@ from temporal_torchrl.reward_quality import (  # noqa: E402
     make_finetuning_buffer,
     state_rewards,
     success_length,
-    variant_reward,
 )
-from temporal_torchrl.rewards import TemporalReward  # noqa: E402
+from temporal_torchrl.rewards import TemporalReward, single_part  # noqa: E402
 from temporal_torchrl.training import factories  # noqa: E402
 
 #: (label, variant, certainty scaling)
@@ -98,7 +97,8 @@ def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
     shapes = {}
     for label, variant, scaling in CONFIGURATIONS:
         torch.manual_seed(cfg.env.seed)
-        reward = variant_reward(variant, encoder.dim, texts[0], texts[1], k=cfg.reward.k,
+        reward = TemporalReward(encoder.dim, texts[0], texts[1], **single_part(variant),
+                                k=cfg.reward.k,
                                 certainty_bandwidth=cfg.reward.certainty_bandwidth,
                                 certainty_prior=cfg.reward.certainty_prior,
                                 certainty_scaling=scaling)

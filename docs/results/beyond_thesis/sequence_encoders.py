@@ -41,9 +41,8 @@ from temporal_torchrl.reward_quality import (  # noqa: E402
     finetune_reward,
     make_finetuning_buffer,
     score_reward,
-    variant_reward,
 )
-from temporal_torchrl.rewards import TemporalReward  # noqa: E402
+from temporal_torchrl.rewards import TemporalReward, single_part  # noqa: E402
 from temporal_torchrl.training import factories  # noqa: E402
 
 ENCODERS = ("transformer", "convolution")
@@ -72,7 +71,8 @@ class TemporalConvolution(nn.Module):
 
 def sequence_reward(encoder: str, dim: int, goal: Tensor, baseline: Tensor,
                     window_length: int) -> TemporalReward:
-    reward = variant_reward("d_sequence", dim, goal, baseline, window_length=window_length)
+    reward = TemporalReward(dim, goal, baseline, **single_part("d_sequence"),
+                            window_length=window_length)
     if encoder == "convolution":
         reward.directional_heads.image = TemporalConvolution(2 * dim, window_length - 1)
     return reward
@@ -87,7 +87,7 @@ def update_milliseconds(reward: TemporalReward, dim: int, window_length: int,
                            "initial_embedding": window[:, 0], "embedding_window": window}, [256])
 
     batch = TensorDict({"negative": states(), "positive": states()}, [256])
-    loss, = finetuning_losses(reward, torch.randn(dim))
+    loss, = finetuning_losses(reward, torch.randn(dim), stage=2)
     optimizer = torch.optim.Adam(loss.parameters(), lr=1e-4, fused=True)
     times = []
     for _ in range(repeats + 3):

@@ -9,9 +9,9 @@ first success) are embedded, and two rank correlations are computed per episode:
 
 An encoder whose similarity rises monotonically along successful episodes scores 1.
 ``recipes/evaluate_encoder.py`` runs it; ``recipes/pretrain_encoder.py`` calls
-:func:`evaluate_encoders` at its end.
+:func:`evaluate_encoders` at its end. Unlike the rest of :mod:`temporal_torchrl.reward_quality`
+it scores encoders alone, without a reward's heads.
 """
-
 
 from __future__ import annotations
 
@@ -24,13 +24,18 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from scipy.stats import spearmanr
+from tensordict import TensorDictBase
 
-from temporal_torchrl.encoders.base import Encoder
-from temporal_torchrl.encoders.small import SmallEncoder
+from temporal_torchrl.encoders import (
+    Encoder,
+    SmallEncoder,
+    load_encoder,
+    save_random_liv_checkpoint,
+)
 from temporal_torchrl.envs import EVALUATION_TASKS, TASKS, collect_expert_episodes
 
 
-def episode_frames(episode) -> torch.Tensor:
+def episode_frames(episode: TensorDictBase) -> torch.Tensor:
     """All frames o_0 .. o_T of a rendered episode: uint8 ``[T + 1, H, W, 3]``."""
     return torch.cat([episode["pixels"], episode["next", "pixels"][-1:]])
 
@@ -81,15 +86,15 @@ def random_liv_encoder(seed: int = 0) -> Encoder:
     ``save_random_liv_checkpoint`` writes random weights in LIV's on-disk format to a temporary
     file, read back by ``load_encoder("liv", checkpoint=...)``.
     """
-    from temporal_torchrl.encoders import load_encoder, save_random_liv_checkpoint
-
     with tempfile.TemporaryDirectory() as directory:
         path = Path(directory) / "random_liv.pt"
         save_random_liv_checkpoint(path, seed=seed)
         return load_encoder("liv", checkpoint=str(path))
 
 
-def evaluate_encoders(encoders: dict[str, Callable[[], Encoder]], small_videos, large_videos,
+def evaluate_encoders(encoders: dict[str, Callable[[], Encoder]],
+                      small_videos: dict[str, list[torch.Tensor]],
+                      large_videos: dict[str, list[torch.Tensor]],
                       large_stride: int) -> list[dict]:
     """One row per encoder: per-task text-goal rho, their mean and the mean image-goal rho.
 
@@ -140,8 +145,6 @@ def default_encoders(small_checkpoint: str | None, liv_checkpoint: str | None, s
     if with_random_liv:
         encoders["LIV RN50 (random weights)"] = lambda: random_liv_encoder(seed)
     if liv_checkpoint:
-        from temporal_torchrl.encoders import load_encoder
-
         encoders["LIV RN50 (released weights)"] = lambda: load_encoder(
             "liv", checkpoint=liv_checkpoint)
     return encoders

@@ -1,0 +1,89 @@
+"""A study's raw files, copied out of its sweep so that they can be committed.
+
+A finished run's raw files are what the reports read: its config, summary, episode rows and
+logged metrics (``metrics.jsonl`` and the CSV logger's ``logs/``). Its checkpoints and replay
+episodes (megabytes a run, needed only to resume it or to plot its reward curves) stay in the
+sweep. Hydra's ``multirun.yaml`` is copied with this machine's paths taken out of it, so that no
+committed file names a machine's folders.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from omegaconf import OmegaConf
+
+from temporal_torchrl.runs.layout import CONFIG_FILE, EPISODES_FILE, METRICS_FILE, SUMMARY_FILE
+
+#: What a committed run holds: files, then folders.
+RAW_FILES = (CONFIG_FILE, SUMMARY_FILE, EPISODES_FILE, METRICS_FILE)
+RAW_FOLDERS = ("logs",)
+MULTIRUN_FILE = "multirun.yaml"
+
+
+def finished_runs(sweep: Path, patterns: Sequence[str] = ("**",)) -> list[Path]:
+    """The run directories under ``sweep`` that hold a summary (the recipe writes it last) and
+    match one of the glob ``patterns`` (relative to ``sweep``, e.g. ``window-close/*/*``)."""
+    found = {summary.parent for pattern in patterns
+             for summary in Path(sweep).glob(f"{pattern.rstrip('/')}/{SUMMARY_FILE}")}
+    return sorted(found)
+
+
+def copy_raw_files(run: Path, destination: Path) -> list[Path]:
+    """Copy ``run``'s raw files into ``destination`` (replacing what is there); returns them."""
+    destination.mkdir(parents=True, exist_ok=True)
+    copied = []
+    for name in RAW_FILES:
+        if (run / name).is_file():
+            shutil.copy2(run / name, destination / name)
+            copied.append(destination / name)
+    for name in RAW_FOLDERS:
+        if (run / name).is_dir():
+            shutil.rmtree(destination / name, ignore_errors=True)
+            shutil.copytree(run / name, destination / name)
+            copied.append(destination / name)
+    return copied
+
+
+def portable_multirun(text: str) -> str:
+    """Hydra's ``multirun.yaml`` without the machine's paths: the working directory it records
+    is dropped, and every string under it is made relative to it."""
+    config = OmegaConf.create(text)
+    cwd = OmegaConf.select(config, "hydra.runtime.cwd")
+    container = OmegaConf.to_container(config, resolve=False)
+    if cwd:
+        prefix = str(cwd).rstrip("/") + "/"
+
+        def relative(value: Any) -> Any:
+            if isinstance(value, dict):
+                return {key: relative(item) for key, item in value.items()}
+            if isinstance(value, list):
+                return [relative(item) for item in value]
+            if isinstance(value, str) and (value == cwd or value.startswith(prefix)):
+                return value[len(prefix):] or "."
+            return value
+
+        container = relative(container)
+        del container["hydra"]["runtime"]["cwd"]
+    return OmegaConf.to_yaml(OmegaConf.create(container))
+
+
+def collect_study(sweep: Path, destination: Path,
+                  patterns: Sequence[str] = ("**",)) -> list[Path]:
+    """Copy every finished run of ``sweep`` that matches ``patterns`` into ``destination`` under
+    the same relative paths, and the sweep's ``multirun.yaml`` (its latest launch) without
+    machine paths; returns the runs copied (in ``destination``)."""
+    sweep, destination = Path(sweep), Path(destination)
+    copied = []
+    for run in finished_runs(sweep, patterns):
+        target = destination / run.relative_to(sweep)
+        copy_raw_files(run, target)
+        copied.append(target)
+    if (sweep / MULTIRUN_FILE).is_file():
+        destination.mkdir(parents=True, exist_ok=True)
+        (destination / MULTIRUN_FILE).write_text(
+            portable_multirun((sweep / MULTIRUN_FILE).read_text()))
+    return copied

@@ -1,0 +1,45 @@
+"""Files that survive a kill or a power cut: each is written whole, flushed to disk and renamed
+over the old one, and the rename flushed too, so a reader finds the old file or the new one."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+
+def flush_to_disk(file: IO) -> None:
+    file.flush()
+    os.fsync(file.fileno())
+
+
+def fsync_directory(path: Path) -> None:
+    """Flush a directory's entries (a rename, a new file) to disk."""
+    descriptor = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)
+
+
+def write_synced(path: Path, write: Callable[[IO[bytes]], None]) -> None:
+    """Create ``path`` with what ``write`` writes into it, flushed to disk before returning."""
+    with path.open("wb") as file:
+        write(file)
+        flush_to_disk(file)
+
+
+def write_file(path: Path, write: Callable[[IO[bytes]], None]) -> None:
+    """Write ``path`` whole: ``write`` fills a temporary file, which is flushed to disk and
+    renamed over ``path``; then the rename itself is flushed (the directory entry)."""
+    temporary = path.with_name(path.name + ".tmp")
+    write_synced(temporary, write)
+    os.replace(temporary, path)
+    fsync_directory(path.parent)
+
+
+def write_json(path: str | Path, payload: Mapping[str, Any]) -> None:
+    """``payload`` as indented JSON, written whole (:func:`write_file`)."""
+    write_file(Path(path), lambda file: file.write((json.dumps(payload, indent=2) + "\n").encode()))
