@@ -11,6 +11,7 @@ from tensordict import TensorDict
 
 from temporal_torchrl.encoders import (
     ENCODERS,
+    Encoder,
     ImagePreprocessor,
     LIVEncoder,
     OpenCLIPEncoder,
@@ -295,3 +296,75 @@ def test_open_clip_pretrained_tag_loads_from_the_cache_offline(liv_files, tmp_pa
     assert encoder.dim == 1024
     torch.testing.assert_close(encoder.model.visual.conv1.weight, source.visual.conv1.weight,
                                rtol=0, atol=0)
+
+
+# ---- the encoder evaluation (reward_quality.encoder_evaluation)
+
+
+class BrightnessEncoder(Encoder):
+    """Embeds a frame as ``[mean brightness, 1]`` and every prompt as ``[1, 0]``: its text-goal
+    value csim is v / sqrt(v^2 + 1), which rises with the brightness v."""
+
+    name, dim = "brightness", 2
+
+    def embed_images(self, frames: torch.Tensor) -> torch.Tensor:
+        brightness = frames.float().mean(dim=(1, 2, 3))
+        return torch.stack([brightness, torch.ones_like(brightness)], -1)
+
+    def _encode_text(self, texts):
+        return torch.tensor([[1.0, 0.0]]).expand(len(texts), 2)
+
+
+def video(brightness: list[int]) -> torch.Tensor:
+    return torch.tensor(brightness, dtype=torch.uint8)[:, None, None, None].expand(-1, 4, 4, 3)
+
+
+def spearman_without_ties(order: list[int]) -> float:
+    """rho = 1 - 6 sum d^2 / (n (n^2 - 1)) for values ranked ``order`` against time."""
+    n = len(order)
+    ranks = sorted(range(n), key=lambda i: order[i])
+    rank_of = {index: rank for rank, index in enumerate(ranks)}
+    return 1 - 6 * sum((t - rank_of[t]) ** 2 for t in range(n)) / (n * (n * n - 1))
+
+
+def test_value_order_correlations_equal_the_rank_formula():
+    from temporal_torchrl.reward_quality.encoder_evaluation import value_order_correlations
+
+    # Brightness over time; the last frame (the image goal) is the brightest.
+    first, second = [10, 30, 20, 50, 40, 90], [5, 15, 25, 35, 80, 45, 95]
+    result = value_order_correlations(BrightnessEncoder(), {"drawer-open": [video(first),
+                                                                            video(second)]})
+    # Text goal: csim rises with brightness, so rho ranks the brightness itself.
+    text = (spearman_without_ties(first) + spearman_without_ties(second)) / 2
+    # Image goal [V, 1]: for v < V, csim([v, 1], [V, 1]) rises with v; the goal frame left out.
+    image = (spearman_without_ties(first[:-1]) + spearman_without_ties(second[:-1])) / 2
+    assert result["text"]["drawer-open"] == pytest.approx(text, abs=1e-9)
+    assert result["image"]["drawer-open"] == pytest.approx(image, abs=1e-9)
+    assert text < 1  # the orders are not monotone, so the check can fail for a wrong rank
+
+    # frame_stride 2 keeps frames 5, 3, 1 of the first video (always the last frame).
+    strided = value_order_correlations(BrightnessEncoder(), {"drawer-open": [video(first)]},
+                                       frame_stride=2)
+    assert strided["text"]["drawer-open"] == pytest.approx(
+        spearman_without_ties([first[1], first[3], first[5]]), abs=1e-9)
+
+
+def test_evaluate_encoders_gives_liv_rows_the_large_videos():
+    from temporal_torchrl.envs import EVALUATION_TASKS
+    from temporal_torchrl.reward_quality.encoder_evaluation import (
+        evaluate_encoders,
+        markdown_table,
+    )
+
+    rising, falling = video([10, 20, 30, 40]), video([40, 30, 20, 10, 50])
+    small = {task: [rising] for task in EVALUATION_TASKS}
+    large = {task: [falling] for task in EVALUATION_TASKS}
+    rows = evaluate_encoders({"small": BrightnessEncoder, "LIV (random)": BrightnessEncoder},
+                             small, large, large_stride=1)
+    assert [row["encoder"] for row in rows] == ["small", "LIV (random)"]
+    assert rows[0]["mean text-goal rho"] == pytest.approx(1.0)
+    assert rows[1]["mean text-goal rho"] == pytest.approx(spearman_without_ties([40, 30, 20,
+                                                                                 10, 50]))
+    table = markdown_table(rows).splitlines()
+    assert table[0].startswith("| encoder |") and "seconds" not in table[0]
+    assert len(table) == 4 and "| LIV (random) |" in table[3]

@@ -54,6 +54,7 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
 
     Example:
         >>> from temporal_torchrl.encoders import load_encoder
+        >>> from temporal_torchrl.envs import make_temporal_reward
         >>> encoder = load_encoder("metaworld_small")
         >>> reward = make_temporal_reward("drawer-open", encoder, rho=1.0, lambda_=4.0)
         >>> env = make_temporal_env("drawer-open", encoder=encoder, reward=reward,
