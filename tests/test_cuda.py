@@ -13,7 +13,9 @@ so (``benchmarks/gpu_check.sh`` runs them on a new GPU node).
 
 The unmarked tests are their CPU side, which CI runs: the same comparisons with CPU on both
 sides (the helpers, the random-draw harness and the APIs they call), the timeout's kill of a
-whole process group, and the EGL probe with two envs.
+whole process group, the EGL probe with two envs, and ``benchmarks/gpu_check.sh``'s CPU path
+(no GPU: it says so in its JSON and exits 0), its sections' timeouts and budget, and its GPU
+sections run on the CPU at smoke sizes.
 """
 
 from __future__ import annotations
@@ -49,9 +51,12 @@ NO_CUDA = ("no CUDA device: torch.cuda.is_available() is False (torch "
            "on a GPU node by benchmarks/gpu_check.sh")
 cuda = pytest.mark.skipif(not HAS_CUDA, reason=NO_CUDA)
 
-#: The EGL probe's limit with 8 envs: 8 spawned workers importing torch and opening an EGL
-#: context take 20-60 s on a node's cores; a hang (mujoco #3444) never ends.
-EGL_TIMEOUT_S = 240
+#: The EGL probe's limit with 8 envs on a GPU node: 8 spawned workers importing torch and
+#: opening an EGL context take 20-60 s on a node's cores; a hang (mujoco #3444) never ends. Kept
+#: short so that a hang leaves gpu_check.sh's five minutes time for its other sections.
+EGL_TIMEOUT_S = 90
+#: The same probe's limit with 2 envs rendering in software on a busy 2-core CI machine.
+CPU_EGL_TIMEOUT_S = 240
 #: The GL renderers that draw in software: frames from them mean EGL found no GPU driver.
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "software")
 
@@ -379,7 +384,7 @@ def test_egl_renders_eight_envs_on_the_gpu_without_hanging():
 @pytest.mark.slow
 def test_egl_probe_runs_two_envs_on_the_cpu():
     """The CPU side: the same probe with 2 envs (Mesa's software EGL here)."""
-    result = egl_probe(2, "cpu", EGL_TIMEOUT_S)
+    result = egl_probe(2, "cpu", CPU_EGL_TIMEOUT_S)
     assert result["renderer"]
 
 
@@ -421,3 +426,105 @@ def test_cuda_tests_skip_naming_why():
     if HAS_CUDA:
         pytest.skip("CUDA is present: the cuda tests run")
     assert "no CUDA device" in NO_CUDA and "gpu_check.sh" in NO_CUDA
+
+
+# ---- benchmarks/gpu_check.sh: its CPU path, its timeouts and budget, its sections on the CPU
+
+
+@pytest.fixture
+def gpu_rows(monkeypatch: pytest.MonkeyPatch):
+    """``benchmarks/gpu_rows.py`` as a module (it imports the standard library alone)."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    import gpu_rows
+
+    return gpu_rows
+
+
+def gpu_check(out: Path, *options: str, timeout: float = 240) -> tuple[int | None, str, dict]:
+    """``gpu_check.sh OUT --no-install`` with this Python, the GPU hidden (so that a GPU
+    machine checks the CPU path too): its exit status, output and JSON."""
+    env = {**os.environ, "PYTHON": sys.executable, "CUDA_VISIBLE_DEVICES": ""}
+    status, output = run_with_timeout(["bash", str(ROOT / "benchmarks" / "gpu_check.sh"),
+                                       str(out), "--no-install", *options], timeout, env)
+    assert (out / "gpu_check.json").exists(), output[-3000:]
+    return status, output, json.loads((out / "gpu_check.json").read_text())
+
+
+def test_gpu_check_without_a_gpu_says_so_and_exits_0(tmp_path):
+    """The CPU path: the install skipped (--no-install), the environment read, the cuda tests
+    run (each skipped, naming why), the GPU sections written as skipped because no GPU was
+    found; exit status 0, the JSON and the logs in the output folder."""
+    status, output, check = gpu_check(tmp_path, "--sections", "cuda_tests,encoder")
+    assert status == 0, output[-3000:]
+    assert check["gpu"] is None and check["cuda"] is False and check["failed"] == []
+    assert check["no_gpu"].startswith("no GPU found") and check["rows"] == []
+    sections = {entry["name"]: entry for entry in check["sections"]}
+    assert list(sections) == ["install", "environment", "cuda_tests", "encoder"]
+    assert sections["install"]["status"] == "skipped"
+    environment = check["environment"]
+    assert environment["cuda_available"] is False and environment["versions"]["torchrl"]
+    assert environment["paths"]["temporal_torchrl"] == str(ROOT / "temporal_torchrl")
+    tests = sections["cuda_tests"]["info"]["tests"]
+    assert sections["cuda_tests"]["status"] == "ok" and len(tests) >= 5
+    assert {test["outcome"] for test in tests} == {"skipped"}
+    assert all("no CUDA device" in test["message"] for test in tests)
+    assert sections["encoder"]["status"] == "skipped"
+    assert "no GPU found" in sections["encoder"]["reason"]
+    assert {"gpu_check.log", "cuda_tests.log"} <= {path.name for path in tmp_path.iterdir()}
+    assert "none failed" in (tmp_path / "gpu_check.log").read_text()
+
+
+def test_gpu_check_section_that_hangs_is_killed_and_named(gpu_rows, tmp_path, monkeypatch):
+    """A section past its timeout is killed and written as a timeout with the likely cause (the
+    8-env loops: mujoco #3444); an environment that does not come up stops the sections after
+    it; a spent budget leaves the rest not run; and the check's exit status says it failed."""
+    slow = gpu_rows.Section("environment", 0.5, needs_gpu=False, hang_hint=gpu_rows.EGL_HANG)
+    monkeypatch.setattr(gpu_rows, "SECTIONS", (slow, gpu_rows.BY_NAME["encoder"]))
+    check = gpu_rows.Check(out=tmp_path, python=sys.executable, budget_s=300,
+                           started=time.time(), install=False, wheels=tmp_path,
+                           target=tmp_path, cpu_rows=False,
+                           selected=("environment", "encoder"))
+    assert check.run() == 1
+    written = json.loads((tmp_path / "gpu_check.json").read_text())
+    environment, encoder = written["sections"]
+    assert environment["status"] == "timeout" and "#3444" in environment["reason"]
+    assert "killed" in environment["reason"]
+    assert encoder["status"] == "not run" and "environment section failed" in encoder["reason"]
+    assert written["failed"] == ["environment", "encoder"]
+
+    monkeypatch.setattr(gpu_rows, "SECTIONS", (gpu_rows.BY_NAME["encoder"],))
+    spent = gpu_rows.Check(out=tmp_path, python=sys.executable, budget_s=300,
+                           started=time.time() - 295, install=False, wheels=tmp_path,
+                           target=tmp_path, cpu_rows=False, selected=("encoder",))
+    assert spent.run() == 1
+    (entry,) = json.loads((tmp_path / "gpu_check.json").read_text())["sections"]
+    assert entry["status"] == "not run" and "budget was spent" in entry["reason"]
+
+
+def test_gpu_check_install_names_a_missing_wheelhouse(gpu_rows, tmp_path, monkeypatch):
+    """Without wheels the install section fails, saying how to make them."""
+    monkeypatch.setattr(gpu_rows, "SECTIONS", (gpu_rows.BY_NAME["install"],))
+    check = gpu_rows.Check(out=tmp_path, python=sys.executable, budget_s=300,
+                           started=time.time(), install=True, wheels=tmp_path / "none",
+                           target=tmp_path / "site", cpu_rows=False, selected=("install",))
+    assert check.run() == 1
+    (entry,) = json.loads((tmp_path / "gpu_check.json").read_text())["sections"]
+    assert entry["status"] == "failed" and "device_wheels.sh" in entry["reason"]
+
+
+@pytest.mark.slow
+def test_gpu_check_sections_run_on_the_cpu_at_smoke_sizes(tmp_path):
+    """``--cpu-rows``: GPU sections' code runs on the CPU at smoke sizes and gives its rows, so
+    that the first GPU node does not find their bugs: the encoder's, the bound's and the
+    loop's (the other sections share theirs; all of them take about 7 minutes on 2 cores)."""
+    sections = ("encoder", "sac_update", "loop_shipped_1")
+    status, output, check = gpu_check(tmp_path, "--cpu-rows", "--budget", "900",
+                                      "--sections", ",".join(sections), timeout=960)
+    assert status == 0, output[-3000:]
+    assert check["failed"] == [] and check["sizes"].startswith("smoke"), check["sections"]
+    measured = [entry for entry in check["sections"] if entry["rows"]]
+    assert [entry["name"] for entry in measured] == list(sections)
+    for row in check["rows"]:
+        assert set(row) == {"section", "measure", "project", "reference", "reference is",
+                            "ratio"}, row
+        assert isinstance(row["project"], float) and row["project"] > 0, row
