@@ -16,6 +16,7 @@ from tensordict import TensorDict
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
+EXAMPLES = RECIPES.parent / "examples"
 D = 4
 OBSERVATION_SIZE, ACTION_SIZE = 39, 4  # Metaworld's
 

@@ -1,9 +1,7 @@
 """The scripts in examples/ run, on tiny settings (the state encoder, short episodes), so the
 guides that include them cannot drift from the code."""
 
-import os
 import runpy
-import subprocess
 import sys
 from pathlib import Path
 
@@ -76,19 +74,3 @@ def test_own_reward_in_the_recipe(tmp_path, no_p5):
 def test_own_encoder(capsys):
     example_main("own_encoder.py")(["--steps", "5"])
     assert "bag_of_words_state: embedding (5, 64)" in capsys.readouterr().out
-
-
-def test_sweep_and_report(tmp_path):
-    """Two tiny runs, one after the other (Hydra's basic launcher), then their report."""
-    sweep, out = tmp_path / "sweep", tmp_path / "report"
-    done = subprocess.run(
-        ["bash", str(EXAMPLES / "sweep_and_report.sh"), *TINY_RUN],
-        env={**os.environ, "PYTHON": sys.executable, "SWEEP": str(sweep), "OUT": str(out),
-             "LAUNCHER": "basic"},
-        capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    runs = sorted(path.parent.name for path in sweep.rglob("summary.json"))
-    assert runs == ["seed0", "seed1"]
-    assert "(n=2)" in (out / "ttfs.md").read_text() or "2 censored" in (
-        out / "ttfs.md").read_text()
-    assert (out / "report.md").is_file() and (out / "success_curves.png").is_file()

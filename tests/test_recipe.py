@@ -1,4 +1,5 @@
-"""End-to-end runs of recipes/sac_temporal.py: every reward variant, stage 2, resume, bad config."""
+"""End-to-end runs of recipes/sac_temporal.py: every reward variant, stage 2, metrics, run
+directories, bad config (resume: test_resume.py)."""
 
 import json
 import sys
@@ -7,14 +8,13 @@ from pathlib import Path
 import pytest
 import sac_temporal
 import torch
-from helpers import QUICK, RECIPES, config
+from helpers import RECIPES, config
 from helpers import episode_csv_rows as episode_rows
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
-from torchrl.modules import MLP, ValueOperator
 
 import temporal_torchrl.training.episodes as episodes_module
-from temporal_torchrl.runs import RunDirectory, default_run_dir, override_keys, resumed_config
+from temporal_torchrl.runs import RunDirectory, default_run_dir
 from temporal_torchrl.training import factories
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -24,6 +24,9 @@ VARIANTS = [("none", "none"), ("liv", "none"), ("furl", "none"), ("p1", "none"),
             ("p2", "none"), ("p3", "none"), ("p4", "none"), ("furl", "d1"), ("furl", "d2"),
             ("furl", "d3"), ("furl", "d4"), ("furl", "d5"), ("furl", "d_certainty"),
             ("furl", "d_sequence")]
+
+
+# ---- every reward variant
 
 
 @pytest.mark.parametrize(("positional", "directional"), VARIANTS)
@@ -51,6 +54,9 @@ def test_every_reward_variant_runs(tmp_path, positional, directional):
     assert saved["ttfs"] == summary["ttfs"] == first_success
     assert saved["ras"] == {"value": None, "budget": 300, "window": 150}
     assert saved["config"]["reward"]["positional"] == positional
+
+
+# ---- stage 2: preloaded and saved positives
 
 
 def test_stage_two_preloads_positive_experts(tmp_path):
@@ -161,6 +167,9 @@ register_reward("user_p5", towards_goal_since_start, kind="positional")
 """
 
 
+# ---- rewards of the user's and beyond the thesis
+
+
 def test_a_reward_from_reward_modules_trains_and_resumes(tmp_path):
     from temporal_torchrl.rewards import POSITIONAL, unregister_reward
 
@@ -220,6 +229,9 @@ def test_beyond_thesis_rewards_train_and_resume_exactly(tmp_path, overrides):
         assert first.reward["directional_heads.image.position_embedding"].shape == (3, 64)
 
 
+# ---- metrics
+
+
 def test_training_metrics_are_logged_and_summarised(tmp_path):
     """SAC's losses, alpha and entropy, the finetuning loss terms, the stage, the positives and
     the relabelled reward statistics reach the CSV logger every logger.log_every updates and
@@ -268,117 +280,7 @@ def test_a_run_shorter_than_the_log_window_still_logs_its_metrics(tmp_path):
     assert int(step) == 40 and float(value) == pytest.approx(metrics["sac/alpha"])
 
 
-def test_kill_and_resume_continues_the_run(tmp_path):
-    sac_temporal.train(config(tmp_path, "train.episodes=4", "train.stop_after_episodes=2"))
-    run_dir = tmp_path / "run"
-    assert len(episode_rows(run_dir)) == 2 and not (run_dir / "summary.json").exists()
-    # a killed run leaves an episode row the checkpoint may not cover: it is dropped on resume
-    RunDirectory(run_dir).append_episode({"episode": 3, "env_steps": 999, "success": 0,
-                                       "return": 0.0, "mean_vlm_reward": 0.0, "stage": 1})
-    RunDirectory(run_dir).append_metrics(999, {"train/success": 0.0})  # and a metrics point
-    with pytest.raises(FileExistsError, match="resume=true"):
-        sac_temporal.train(config(tmp_path, "train.episodes=4"))
-    summary = sac_temporal.train(config(tmp_path, "train.episodes=4", "resume=true"))
-    rows = episode_rows(run_dir)
-    assert [int(row["episode"]) for row in rows] == [1, 2, 3, 4]
-    assert [int(row["env_steps"]) for row in rows] == [20, 40, 60, 80]
-    # metrics.jsonl with logger.backend=none: the episode points once each, the last (partial)
-    # window of training metrics, then the summary
-    points = RunDirectory(run_dir).metric_points()
-    assert [point["step"] for point in points] == [20, 40, 60, 80, 80, 80]
-    assert [point["train/success"] for point in points[:4]] == [
-        float(row["success"]) for row in rows]
-    assert "sac/loss_qvalue" in points[4]
-    assert set(points[5]) == {"step", "summary/ttfs", "summary/tt50s"}
-    assert summary["episodes"] == 4 and summary["env_steps"] == 80
-    assert RunDirectory(run_dir).load_checkpoint().inserted == 4
-
-
-def test_a_checkpoint_of_torchrls_sac_loss_is_refused_with_the_way_out(tmp_path):
-    """A run checkpointed by the version that trained with TorchRL's SACLoss (critics as
-    functional parameters) cannot resume here: the error names the version that can."""
-    from torchrl.objectives import SACLoss
-
-    sac_temporal.train(config(tmp_path, "train.episodes=2", "train.stop_after_episodes=1"))
-    run = RunDirectory(tmp_path / "run")
-    checkpoint = run.load_checkpoint()
-    env = factories.make_environment(config(tmp_path), None, None)
-    actor, _ = factories.make_sac_agent(config(tmp_path), env)
-    env.close()
-    qvalue = ValueOperator(MLP(in_features=43, num_cells=[256, 256], out_features=1),
-                           in_keys=["action", "observation"])
-    checkpoint.sac_loss = SACLoss(actor, qvalue, num_qvalue_nets=2,
-                                     target_entropy=-2.0).state_dict()
-    run.save_checkpoint(checkpoint)
-    with pytest.raises(ValueError, match="Resume the run with the release that wrote it"):
-        sac_temporal.train(config(tmp_path, "train.episodes=2", "resume=true"))
-
-
-def test_resume_continues_with_the_saved_config(tmp_path, capsys):
-    sac_temporal.train(config(tmp_path, "env.task=door-open", "reward.rho=0.05",
-                              "train.episodes=2", "train.stop_after_episodes=1"))
-    # A run started before a config key existed resumes with the key's current default.
-    saved_config = tmp_path / "run" / "config.json"
-    saved = json.loads(saved_config.read_text())
-    del saved["train"]["expert_steps_after_success"]
-    saved_config.write_text(json.dumps(saved))
-    # Only the run directory and resume=true are restated; the defaults name another task.
-    summary = sac_temporal.train(config(tmp_path, "resume=true", "train.episodes=2"))
-    assert summary["config"]["env"]["task"] == "door-open"
-    assert summary["config"]["reward"]["rho"] == 0.05
-    assert summary["ras"]["budget"] == 400  # door-open's, not drawer-open's 300
-    assert summary["config"]["train"]["expert_steps_after_success"] is None
-    assert "not using the current values of env.task" in capsys.readouterr().out
-
-
-def test_resume_changes_only_the_resumable_keys_given(tmp_path, capsys):
-    sac_temporal.train(config(tmp_path, "train.episodes=6", "train.stop_after_episodes=1"))
-    run_dir = tmp_path / "run"
-    # On the command line: `resume=true output_dir=...` restates neither value.
-    cfg = config(tmp_path, "resume=true", "train.episodes=3", "train.checkpoint_every=2")
-    resumed = resumed_config(cfg, run_dir, override_keys(
-        ["resume=true", f"output_dir={run_dir}", "+train.checkpoint_every=2"]))
-    assert resumed.train.episodes == 6 and resumed.train.checkpoint_every == 2
-    assert resumed.resume and resumed.train.stop_after_episodes is None
-    assert "not using the current values of train.episodes" in capsys.readouterr().out
-    # A config built in code means all of its values.
-    assert resumed_config(cfg, run_dir).train.episodes == 3
-
-
-def test_resume_validates_the_config_it_runs(tmp_path):
-    sac_temporal.train(config(tmp_path, "train.stop_after_episodes=1"))
-    saved_config = tmp_path / "run" / "config.json"
-    saved = json.loads(saved_config.read_text())
-    saved["reward"]["rho"] = -1.0
-    saved_config.write_text(json.dumps(saved))
-    with pytest.raises(ValueError, match=r"reward\.rho=-1\.0"):
-        sac_temporal.train(config(tmp_path, "resume=true"))
-
-
-def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
-    """Resuming with more episodes grows a whole-run buffer; with a fixed capacity the ring
-    wraps but never overwrites the preloaded experts."""
-    run_dir = tmp_path / "run"
-    stage2 = ["protocol=stage2", "train.preload_positives=1", "train.random_steps=5"]
-    sac_temporal.train(config(tmp_path, *stage2, "train.episodes=2"))
-    expert_rows = RunDirectory(run_dir).load_checkpoint().expert_rows
-    assert RunDirectory(run_dir).load_checkpoint().buffer_capacity == 2 * 21 + expert_rows
-    summary = sac_temporal.train(config(tmp_path, "resume=true", "train.episodes=5"))
-    assert summary["episodes"] == 5
-    assert RunDirectory(run_dir).load_checkpoint().buffer_capacity == 5 * 21 + expert_rows
-    assert f"replay capacity grown from {2 * 21 + expert_rows} to {5 * 21 + expert_rows}" in (
-        capsys.readouterr().out)
-
-    small = config(tmp_path, *stage2, "train.episodes=6", "overwrite=true",
-                   f"replay_buffer.capacity={expert_rows + 2 * 21}")
-    sac_temporal.train(small)
-    state = RunDirectory(run_dir).load_checkpoint()
-    buffer = factories.make_replay_buffer(small, state.buffer_capacity, reward=None)
-    for rows in RunDirectory(run_dir).replay_episodes(state.inserted):
-        buffer.extend(rows)
-    stored = set().union(*(buffer.sample()["episode"].tolist() for _ in range(60)))
-    assert stored == {0, 5, 6}  # the expert and the last two training episodes
-    assert buffer.has_positives
+# ---- run directories and the command line
 
 
 def test_default_run_directories_differ_by_protocol_preset_and_seed():
@@ -402,62 +304,6 @@ def test_default_run_directories_differ_by_protocol_preset_and_seed():
     assert directories[7] == Path("runs/drawer-open/sac_stage2/seed0")
 
 
-def test_run_stopped_before_its_first_checkpoint_is_replaced_not_resumed(tmp_path):
-    (tmp_path / "run" / "replay").mkdir(parents=True)
-    with pytest.raises(FileNotFoundError, match="overwrite=true instead of resume=true"):
-        sac_temporal.train(config(tmp_path, "resume=true"))
-    with pytest.raises(FileExistsError, match="holds no checkpoint.pt") as error:
-        sac_temporal.train(config(tmp_path))
-    assert "resume=true" not in str(error.value)
-    assert sac_temporal.train(config(tmp_path, "overwrite=true"))["episodes"] == 3
-
-
-@pytest.mark.slow
-def test_killed_process_resumes(tmp_path):
-    """A second process on the running run is refused; a real SIGKILL in the middle of an
-    episode, then resume=true in a new process."""
-    import os
-    import signal
-    import subprocess
-    import time
-
-    run_dir = tmp_path / "run"
-    args = [sys.executable, str(RECIPES / "sac_temporal.py"), *QUICK, f"output_dir={run_dir}",
-            "train.threads=1"]
-    process = subprocess.Popen([*args, "train.episodes=1000"], stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL)
-    # An episode's row is written just before its checkpoint: the third row means the second
-    # episode's checkpoint is on disk.
-    deadline = time.time() + 120
-    while time.time() < deadline and (not (run_dir / "episodes.csv").exists()
-                                      or len(episode_rows(run_dir)) < 3):
-        time.sleep(0.05)
-    # A second process on the live run stops at once, naming the first (no extra rows written).
-    second = subprocess.run([*args, "resume=true"], capture_output=True, text=True, timeout=300)
-    assert second.returncode != 0
-    assert f"is in use: pid {process.pid} on host" in second.stderr, second.stderr[-2000:]
-    os.kill(process.pid, signal.SIGKILL)
-    process.wait()
-    done = RunDirectory(run_dir).load_checkpoint().episode
-    assert done >= 2
-    # The README's command: nothing restated, so the run keeps its own 1,000 episodes (here it
-    # is stopped one episode later, as if killed again, without writing a summary).
-    resumed = subprocess.run([sys.executable, str(RECIPES / "sac_temporal.py"),
-                              f"output_dir={run_dir}", "resume=true",
-                              f"train.stop_after_episodes={done + 1}", "train.progress=false"],
-                             capture_output=True, text=True, timeout=300)
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
-    assert not (run_dir / "summary.json").exists()
-    # A train.episodes given on the command line ends the run there.
-    finished = subprocess.run([*args, f"train.episodes={done + 2}", "resume=true"],
-                              capture_output=True, text=True, timeout=300)
-    assert finished.returncode == 0, finished.stderr[-2000:]
-    rows = episode_rows(run_dir)
-    assert [int(row["episode"]) for row in rows] == list(range(1, done + 3))
-    assert [int(row["env_steps"]) for row in rows] == [20 * i for i in range(1, done + 3)]
-    assert json.loads((run_dir / "summary.json").read_text())["episodes"] == done + 2
-
-
 @pytest.mark.slow
 def test_rendering_with_random_liv_checkpoint(tmp_path):
     """A new user's command with a local LIV checkpoint: the output is the recipe's own lines,
@@ -470,7 +316,9 @@ def test_rendering_with_random_liv_checkpoint(tmp_path):
     save_random_liv_checkpoint(checkpoint)
     run_dir = tmp_path / "run"
     process = subprocess.run(
-        [sys.executable, str(RECIPES / "sac_temporal.py"), "preset=best", "train.threads=1",
+        # LIV's zero-shot reward: no heads, so no expert episode to embed with RN50 for s_g.
+        [sys.executable, str(RECIPES / "sac_temporal.py"), "encoder.name=liv",
+         "reward.positional=liv", "reward.directional=none", "train.threads=1",
          f"encoder.checkpoint={checkpoint}", "env.image_size=64", "env.max_episode_steps=5",
          "train.episodes=2", "train.random_steps=3", "sac.batch_size=4", "reward.batch_size=4",
          f"output_dir={run_dir}", "logger.backend=none"],
@@ -505,6 +353,9 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     rows = episode_rows(tmp_path / "run")
     assert all(float(row["mean_vlm_reward"]) != 0.0 for row in rows)
     assert (tmp_path / "run" / "logs").exists()
+
+
+# ---- configs refused or composed
 
 
 @pytest.mark.parametrize(("override", "key"), [

@@ -1,4 +1,4 @@
-"""Sweeps on Hydra's launchers: studies compose, submitit resolves without Slurm, and a real
+"""Sweeps on Hydra's launchers: studies compose, submitit resolves without Slurm, and the example
 two-job joblib sweep writes one run per job, resumes when re-launched, and shares the cores."""
 
 import json
@@ -7,7 +7,7 @@ import subprocess
 import sys
 
 import pytest
-from helpers import QUICK, RECIPES, make_checkpoint
+from helpers import EXAMPLES, QUICK, RECIPES, make_checkpoint
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
@@ -82,13 +82,19 @@ def test_a_finished_run_returns_its_summary_untouched(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_two_job_joblib_sweep_runs_resumes_and_reports(tmp_path):
-    sweep = tmp_path / "sweep"
-    command = [sys.executable, str(RECIPES / "sac_temporal.py"), "-m", "hydra/launcher=joblib",
-               "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={sweep}", *QUICK,
-               "logger.backend=csv", "env.seed=0,1"]
-    first = subprocess.run([*command, "train.episodes=2"], capture_output=True, text=True,
-                           timeout=300, cwd=tmp_path)
+def test_the_example_sweep_runs_resumes_and_reports(tmp_path):
+    """examples/sweep_and_report.sh (a two-job joblib sweep, then its report) writes one run per
+    job; launched again with more episodes, it continues both runs and reports them."""
+    sweep, out = tmp_path / "sweep", tmp_path / "report"
+
+    def launch(episodes: int) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            ["bash", str(EXAMPLES / "sweep_and_report.sh"), "hydra.launcher.n_jobs=2", *QUICK,
+             "logger.backend=csv", f"train.episodes={episodes}"],
+            env={**os.environ, "PYTHON": sys.executable, "SWEEP": str(sweep), "OUT": str(out)},
+            capture_output=True, text=True, timeout=300, cwd=tmp_path)
+
+    first = launch(2)
     assert first.returncode == 0, first.stderr[-3000:]
     runs = sorted(path.parent for path in sweep.rglob("config.json"))
     assert [run.relative_to(sweep).as_posix() for run in runs] == [
@@ -97,20 +103,15 @@ def test_two_job_joblib_sweep_runs_resumes_and_reports(tmp_path):
         config = json.loads((run / "config.json").read_text())
         assert config["train"]["threads"] == max(1, os.cpu_count() // 2)
         assert json.loads((run / "summary.json").read_text())["episodes"] == 2
-    # The same sweep launched again with more episodes continues both runs.
-    again = subprocess.run([*command, "train.episodes=3"], capture_output=True, text=True,
-                           timeout=300, cwd=tmp_path)
+    again = launch(3)
     assert again.returncode == 0, again.stderr[-3000:]
     for run in runs:
         rows = (run / "episodes.csv").read_text().splitlines()
         assert [row.split(",")[0] for row in rows[1:]] == ["1", "2", "3"]
-    # sweep -> report: both seeds grouped into one configuration, censored TTFS (3 episodes).
-    out = tmp_path / "report"
-    made = subprocess.run([sys.executable, str(RECIPES / "report.py"), str(sweep), "--out",
-                           str(out)], capture_output=True, text=True, timeout=300)
-    assert made.returncode == 0, made.stderr[-3000:]
+    # Both seeds grouped into one configuration, with censored TTFS (3 episodes).
     ttfs = (out / "ttfs.md").read_text()
     assert "drawer-open" in ttfs and ("2 censored" in ttfs or "(n=2)" in ttfs), ttfs
+    assert (out / "report.md").is_file()
     assert (out / "success_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

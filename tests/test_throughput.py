@@ -62,38 +62,37 @@ def test_batched_env_keeps_each_envs_history_across_resets():
     assert not torch.equal(rollout[0]["next", "observation"], rollout[1]["next", "observation"])
 
 
-@pytest.mark.parametrize(("utd_ratio", "expected_updates"), [(1, 40), (0.5, 20)])
-def test_several_envs_insert_every_episode_and_keep_the_update_ratio(tmp_path, utd_ratio,
-                                                                     expected_updates):
+@pytest.mark.parametrize(("utd_ratio", "expected_updates", "resume"),
+                         [(1, 40, True), (0.5, 20, False)])
+def test_several_envs_insert_every_episode_keep_the_update_ratio_and_resume(
+        tmp_path, utd_ratio, expected_updates, resume):
     """2 envs, 20-step episodes, 4 episodes = 40 vector steps. The first episodes end at vector
     step 20 (insertion after that step's updates), so updates run on vector steps 21..40:
-    20 x 2 envs x utd_ratio."""
-    cfg = config(tmp_path, "env.num_envs=2", "train.episodes=4", "train.random_steps=10",
-                 "reward.directional=d3", f"train.utd_ratio={utd_ratio}")
-    summary = sac_temporal.train(cfg)
+    20 x 2 envs x utd_ratio. The same run stopped after 2 episodes and resumed gives the same
+    episodes and SAC agent (checked once: at utd_ratio 1)."""
+    common = ["env.num_envs=2", "train.episodes=4", "train.random_steps=10",
+              "reward.directional=d3", f"train.utd_ratio={utd_ratio}"]
+    straight, resumed = tmp_path / "straight", tmp_path / "resumed"
+    summary = sac_temporal.train(config(straight, *common))
     assert summary["updates"] == expected_updates
     assert summary["env_steps"] == 80 and summary["episodes"] == 4
-    rows = episode_rows(tmp_path / "run")
+    rows = episode_rows(straight / "run")
     assert [int(row["env_steps"]) for row in rows] == [40, 40, 80, 80]
-    state = RunDirectory(tmp_path / "run").load_checkpoint()
+    state = RunDirectory(straight / "run").load_checkpoint()
     assert state.inserted == 4
-    stored = list(RunDirectory(tmp_path / "run").replay_episodes(4))
+    stored = list(RunDirectory(straight / "run").replay_episodes(4))
     assert [len(episode) for episode in stored] == [21] * 4
     # the two envs of one round stored different trajectories
     assert not torch.equal(stored[0]["observation"], stored[1]["observation"])
-
-
-def test_several_envs_resume_like_the_uninterrupted_run(tmp_path):
-    common = ["env.num_envs=2", "train.episodes=4", "reward.directional=d3"]
-    straight = sac_temporal.train(config(tmp_path / "a", *common))
-    sac_temporal.train(config(tmp_path / "b", *common, "train.stop_after_episodes=2"))
-    resumed = sac_temporal.train(config(tmp_path / "b", "resume=true", "train.episodes=4"))
-    assert resumed["successes"] == straight["successes"]
-    assert episode_rows(tmp_path / "a" / "run") == episode_rows(tmp_path / "b" / "run")
-    first, second = (RunDirectory(tmp_path / name / "run").load_checkpoint()
-                     for name in ("a", "b"))
-    for key, value in first.sac_loss.items():
-        torch.testing.assert_close(second.sac_loss[key], value, msg=key)
+    if not resume:
+        return
+    sac_temporal.train(config(resumed, *common, "train.stop_after_episodes=2"))
+    again = sac_temporal.train(config(resumed, "resume=true", "train.episodes=4"))
+    assert again["successes"] == summary["successes"]
+    assert episode_rows(resumed / "run") == rows
+    for key, value in state.sac_loss.items():
+        torch.testing.assert_close(
+            RunDirectory(resumed / "run").load_checkpoint().sac_loss[key], value, msg=key)
 
 
 @pytest.mark.parametrize("stage", [1, 2])

@@ -25,8 +25,9 @@ Guarantees:
 
 - **One writer.** A process holds ``run.lock`` (an OS lock, ``flock`` through ``filelock``) for
   as long as it runs; another process on the same directory stops at once with
-  :class:`RunLockedError`, naming the holder. The OS drops the lock of a killed process, so a
-  stale lock never blocks a resume and no lock file ever needs deleting by hand.
+  :class:`~temporal_torchrl.runs.RunLockedError`, naming the holder. The OS drops the lock of a
+  killed process, so a stale lock never blocks a resume and no lock file ever needs deleting by
+  hand.
 - **Nothing half-written.** Every file is written to a temporary file, flushed to disk (fsync),
   renamed over the old one, and the directory entry flushed too; ``episodes.csv`` rows are
   appended and flushed the same way. A kill or a power cut leaves the old file or the new one.
@@ -36,7 +37,7 @@ Guarantees:
   ``positives/`` and ``metrics.jsonl`` are cut back to the checkpoint resumed from
   (:meth:`RunDirectory.resume_state`) and the replay episodes re-inserted in order, so the
   buffer is rebuilt as it was. An unreadable episode row or replay episode stops the resume
-  with :class:`UnreadableRunFile`, naming the file and the fix.
+  with :class:`~temporal_torchrl.runs.UnreadableRunFile`, naming the file and the fix.
 - An existing run is never replaced unless asked (``overwrite``).
 
 Example:
