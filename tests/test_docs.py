@@ -17,6 +17,7 @@ The site itself is built in CI (``.ci/run``), warnings as errors."""
 import ast
 import re
 import shlex
+import sys
 from pathlib import Path
 
 import pytest
@@ -29,6 +30,7 @@ from omegaconf import OmegaConf, open_dict
 
 from temporal_torchrl.configs import RecipeConfig, RewardQualityConfig
 from temporal_torchrl.configs.rules import validate_recipe_config, validate_reward_quality_config
+from temporal_torchrl.rewards.registry import REWARDS, unregister_reward
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -132,9 +134,17 @@ def checked(config_name: str, overrides: list[str]):
         cfg = compose(config_name, overrides=overrides, return_hydra_config=True)
     with open_dict(cfg):
         del cfg["hydra"]
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(torch.cuda, "is_available", lambda: True)
-        return VALIDATE[config_name](cfg)
+    registered, loaded = set(REWARDS), set(sys.modules)
+    try:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(torch.cuda, "is_available", lambda: True)
+            return VALIDATE[config_name](cfg)
+    finally:  # a command's reward.modules register rewards: the other tests see the built-ins
+        for name in set(REWARDS) - registered:
+            unregister_reward(name)
+        for name in set(sys.modules) - loaded:
+            if name.startswith("reward_module_"):
+                del sys.modules[name]
 
 
 def test_the_pages_have_commands_and_spans():
