@@ -68,14 +68,19 @@ def step_rows(tmp: Path, budget: Budget, mode: str | None, repeats: int) -> list
     matmul_seconds = budget.seconds_per_call(matmuls_alone(step))
     # What compile could give if it removed everything but the matmuls of what it compiles.
     regions = compiled_regions(tmp, budget)
-    region_seconds = sum(budget.seconds_per_call(fn) for fn in regions)
-    region_matmul_seconds = sum(budget.seconds_per_call(matmuls_alone(fn)) for fn in regions)
     eager_times, compiled_times, compile_times, peaks = [], [], [], []
+    region_times, region_matmul_times = [], []
     for _ in range(repeats):
         peaks.append(gemm_flops_per_second(min_seconds=budget.seconds / 4))
         torch._dynamo.reset()
         eager = training_step(False, tmp, budget)
         eager_times.append(budget.seconds_per_call(eager))
+        # The compiled parts timed in the same round as the step they are part of: timed
+        # minutes apart, a change of the machine's load put them above the whole step. A round
+        # whose parts still time above its step counts the step as all compiled parts.
+        region_times.append(sum(budget.seconds_per_call(fn) for fn in regions))
+        region_matmul_times.append(
+            sum(budget.seconds_per_call(matmuls_alone(fn)) for fn in regions))
         compiled = training_step(True, tmp, budget, mode)
         start = time.perf_counter()
         for _ in range(3):  # compilation, and the recompile at the first stage-2 graph
@@ -87,7 +92,12 @@ def step_rows(tmp: Path, budget: Budget, mode: str | None, repeats: int) -> list
               flush=True)
     speedups = sorted(e / c for e, c in zip(eager_times, compiled_times, strict=True))
     eager_seconds = statistics.median(eager_times)
-    ceiling = eager_seconds / (eager_seconds - region_seconds + region_matmul_seconds)
+    region_seconds = statistics.median(region_times)
+    region_matmul_seconds = statistics.median(region_matmul_times)
+    ceiling = statistics.median(
+        eager / max(eager - region + matmul, matmul)
+        for eager, region, matmul in zip(eager_times, region_times, region_matmul_times,
+                                         strict=True))
     return [
         bound_row_by_round(f"training step, eager, median of {repeats} builds (ms)",
                            eager_times, flops, peaks),
