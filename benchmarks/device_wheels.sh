@@ -32,7 +32,8 @@ done
 DEST=${DEST:-$HERE/wheelhouse}
 
 # The closure, each pinned (name==version), grouped by the package that needs it. Versions: the
-# ones the project's venv runs (torch 2.14.1) and the torch-2.11 venv passed the suite with.
+# ones the project's venv runs (torch 2.14.1); a Python 3.12 venv with torch 2.11 ran the test
+# suite with the same ones (but scipy 1.18.1), and the GPU check's CPU path from these wheels.
 WHEELS=(
     # TorchRL and TensorDict. tensordict's compiled part (_C.so) does not link against torch,
     # so it loads under any torch; torchrl's (_torchrl.so, only the prioritized replay's segment

@@ -159,6 +159,11 @@ class StackedCriticSACLoss(LossModule):
             reward = tensordict["next", "reward"].squeeze(-1)
             bootstrap = ~tensordict["next", "terminated"].squeeze(-1)
             target = reward + self.gamma * bootstrap * next_value
+        if torch.compiler.is_compiling():
+            # Two graphs, so that the compiled update draws its noise in the eager order: torch
+            # 2.11's inductor scheduled the two independent draws (next state's, then this
+            # state's) the other way round, even with fallback_random (torch 2.14 keeps them).
+            torch._dynamo.graph_break()
         loss_qvalue = (self.critics(observation, action) - target).pow(2).sum(0).mean()
         new_action, log_prob = self._sample(observation)
         new_value = self.critics(observation, new_action, detach_parameters=True).min(0).values
