@@ -28,16 +28,20 @@ import logging
 import math
 import time
 from collections.abc import Callable, Collection
+from dataclasses import dataclass
 
 import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
+from tensordict import TensorDictBase
+from torchrl.collectors import Collector
 from tqdm import tqdm
 
 from temporal_torchrl.configs.rules import validate_recipe_config
-from temporal_torchrl.data import episode_rows
+from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
+from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.runs import (
     RunDirectory,
     override_keys,
@@ -49,6 +53,9 @@ from temporal_torchrl.runs import (
 from temporal_torchrl.training import (
     EpisodeAssembler,
     MetricWindow,
+    RewardHeadTrainer,
+    RunLogger,
+    RunStart,
     TrainingState,
     episode_row,
     factories,
@@ -57,6 +64,7 @@ from temporal_torchrl.training import (
     run_summary,
     start_run,
 )
+from temporal_torchrl.training.relay import NoRelay, RelayExploration
 
 #: Called after each episode the run records, with its number and the run's env steps then.
 EpisodeEndHook = Callable[[int, int], None]
@@ -78,13 +86,25 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None,
         return _train(cfg, run, given_keys, on_episode_end or (lambda episode, env_steps: None))
 
 
-def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | None,
-           on_episode_end: EpisodeEndHook) -> dict | None:
-    """:func:`train`, once the run's lock is held."""
-    start = start_run(run, cfg, given_keys)  # afresh, from the checkpoint, or already complete
-    if start.complete:
-        print(f"{run.path}: already complete ({start.checkpoint.episode} episodes)")
-        return start.summary
+@dataclass
+class Training:
+    """What a run trains with, built by :func:`build`."""
+
+    encoder: Encoder | None
+    buffer: EpisodeReplayBuffer
+    trainer: RewardHeadTrainer | None  # None: no finetuned heads
+    relay: RelayExploration | NoRelay
+    update_sac: Callable[[TensorDictBase], TensorDictBase]
+    state: TrainingState  # its progress: the counters the loop advances
+    collector: Collector
+    random_until: int  # the env steps whose actions are uniform random
+    logger: RunLogger
+
+
+def build(start: RunStart, run: RunDirectory) -> Training:
+    """The encoder, reward, env, SAC agent, replay, head trainer, relay and collector of the run
+    ``start`` begins, its replay filled and, on a resume, its checkpoint restored. The order is
+    that of the build's random draws, which a resume must repeat."""
     cfg, saved = start.cfg, start.checkpoint  # saved: None on a fresh start
     torch.manual_seed(cfg.env.seed)
 
@@ -126,7 +146,21 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
                                          max(0, cfg.train.random_steps - progress.env_steps))
     random_until = progress.env_steps + collector.init_random_frames
     start.restore_rng()  # after every random draw the build makes
-    logger = factories.make_logger(cfg, run.path)
+    return Training(encoder, buffer, trainer, relay, update_sac, state, collector, random_until,
+                    factories.make_logger(cfg, run.path))
+
+
+def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | None,
+           on_episode_end: EpisodeEndHook) -> dict | None:
+    """:func:`train`, once the run's lock is held."""
+    start = start_run(run, cfg, given_keys)  # afresh, from the checkpoint, or already complete
+    if start.complete:
+        print(f"{run.path}: already complete ({start.checkpoint.episode} episodes)")
+        return start.summary
+    cfg, training = start.cfg, build(start, run)
+    buffer, trainer, relay, logger = (training.buffer, training.trainer, training.relay,
+                                      training.logger)
+    state, progress = training.state, training.state.progress
     metrics = MetricWindow()
     embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
     episodes = EpisodeAssembler(cfg.env.num_envs, buffer.stage)
@@ -146,7 +180,7 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
         for _ in range(sac_updates):
             batch = buffer.sample()  # rewards relabelled with the current heads
             relay_batch = relay.batch_to_learn(batch)  # before SAC's update adds keys to batch
-            metrics.add("sac", update_sac(batch))
+            metrics.add("sac", training.update_sac(batch))
             if relay_batch is not None:  # the relay agent learns from the same batches
                 metrics.add("relay", relay.update(relay_batch))
             metrics.add("relabelled", reward_statistics(batch["next"]))
@@ -178,12 +212,12 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
     num_envs, start_time, start_steps = cfg.env.num_envs, time.perf_counter(), progress.env_steps
     bar = tqdm(total=cfg.train.episodes, initial=progress.episode,
                disable=not cfg.train.progress, desc="episodes")
-    for data in collector:
+    for data in training.collector:
         progress.env_steps += num_envs
         if progress.env_steps > cfg.train.random_steps and buffer.num_transitions > 0:
             update(num_envs)
         ended = episodes.add(data)
-        relay.advance(ended, acted=progress.env_steps > random_until)
+        relay.advance(ended, acted=progress.env_steps > training.random_until)
         if not ended:
             continue
         checkpointed_before = progress.episode // cfg.train.checkpoint_every
@@ -200,14 +234,14 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
         if done or progress.episode >= (cfg.train.stop_after_episodes or math.inf):
             break
     bar.close()
-    collector.shutdown()
+    training.collector.shutdown()
     if progress.episode < cfg.train.episodes:
         return None  # stopped early, as if killed (train.stop_after_episodes)
     if metrics.pending:  # the last window, shorter than logger.log_every updates
         log_training_metrics()
 
     summary = run_summary(
-        cfg, progress, encoder=cfg.encoder.name if encoder is not None else None,
+        cfg, progress, encoder=cfg.encoder.name if training.encoder is not None else None,
         steps_per_second=(progress.env_steps - start_steps) / (time.perf_counter() - start_time),
         relay_steps=relay.total_steps)
     run.write_summary(summary)
