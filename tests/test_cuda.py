@@ -259,6 +259,7 @@ def test_embedding_transform_on_cuda_matches_the_cpu(tmp_path):
     check_embeddings("cuda", tmp_path, batch=64, size=224)
 
 
+@pytest.mark.slow
 def test_embedding_comparison_runs_on_the_cpu(tmp_path):
     """The CPU side: the same comparison, CPU against CPU (bf16 autocast on the CPU), 2 frames
     at 64 px."""
@@ -450,6 +451,7 @@ def gpu_check(out: Path, *options: str, timeout: float = 240) -> tuple[int | Non
     return status, output, json.loads((out / "gpu_check.json").read_text())
 
 
+@pytest.mark.slow
 def test_gpu_check_without_a_gpu_says_so_and_exits_0(tmp_path):
     """The CPU path: the install skipped (--no-install), the environment read, the cuda tests
     run (each skipped, naming why), the GPU sections written as skipped because no GPU was

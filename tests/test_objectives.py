@@ -310,6 +310,7 @@ def test_certainty_loss_by_hand():
     assert int(out["stage"]) == 2 and int(stage1["stage"]) == 1
 
 
+@pytest.mark.slow
 def test_certainty_loss_trains_graded_rewards():
     """The heads learn the targets: -0.5 for the negatives' move, about 0 for the opposite of
     the positives' move, and for the positives' move, which is also the move towards the goal

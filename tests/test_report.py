@@ -531,6 +531,7 @@ def test_reward_curves_give_a_sequence_reward_its_window():
                 s[t], s[0], s[max(t - 2, 0)])), abs=1e-6)
 
 
+@pytest.mark.slow
 def test_report_cli_end_to_end(tmp_path, real_run):
     sweep = tmp_path / "sweep"
     logged = {"sac/loss_qvalue": [(1000, 2.0), (2000, 1.5), (3000, 1.0)]}
@@ -604,6 +605,7 @@ def test_missing_runs_and_metrics_are_named(tmp_path):
     ("reward.directional=d3", "reward.certainty_scaling=true"),
     ("reward.directional=d_sequence", "reward.window=4"),
 ])
+@pytest.mark.slow
 def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
     """report.py --figure-run on runs whose reward has settings beyond the names (a certainty-
     scaled D3, a d_sequence with a 4-state window): the curves are the trained reward's own

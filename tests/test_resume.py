@@ -102,6 +102,7 @@ def wait_for(condition, timeout: float = 60.0) -> None:
         time.sleep(0.01)
 
 
+@pytest.mark.slow
 def test_sigkill_at_random_points_then_resume_gives_the_uninterrupted_episodes(tmp_path):
     """Seven lives of a 12-episode run, each SIGKILLed: one half-way through a checkpoint write,
     one half-way through a replay-episode write, one while it starts (building the model,
@@ -249,6 +250,7 @@ def test_a_second_process_stops_at_once_and_a_killed_holder_leaves_no_stale_lock
     assert sac_temporal.train(config(tmp_path))["episodes"] == 3
 
 
+@pytest.mark.slow
 def test_a_sweep_job_leaves_a_run_a_live_job_writes_alone(tmp_path):
     """Seed 0's run is locked (as by a job of an earlier launch still running): its job says so
     and ends cleanly, seed 1's runs, and the sweep succeeds."""

@@ -1,6 +1,7 @@
 """One reward path: the env, the replay relabelling, SAC's batches and the finetuning losses all
 see the same rewards for the same stored embeddings, checked value by value."""
 
+import pytest
 import sac_temporal
 import torch
 import torch.nn.functional as F
@@ -167,6 +168,7 @@ def spearman(values: torch.Tensor) -> float:
     return float(torch.corrcoef(torch.stack([ranks, time]))[0, 1])
 
 
+@pytest.mark.slow
 def test_ranking_loss_learns_to_order_expert_states_by_time(tmp_path):
     """A learning sanity check: FuRL's heads finetuned on expert positives (pos-pos ranking) and
     random negatives rank the states of a held-out expert episode by time much better than the

@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from helpers import QUICK, RECIPES, episode_csv_rows
 
 from temporal_torchrl.runs import describe_exit
@@ -61,6 +62,7 @@ def wait_for(path: Path, process: subprocess.Popen, seconds: float) -> None:
         time.sleep(0.2)
 
 
+@pytest.mark.slow
 def test_dead_jobs_are_named_and_a_relaunch_resumes_them(tmp_path):
     marker, faults = tmp_path / "faults_on", tmp_path / "faults.py"
     marker.touch()

@@ -30,6 +30,7 @@ def compiled_graphs() -> int:
     return counters["stats"]["unique_graphs"]
 
 
+@pytest.mark.slow
 def test_batched_env_keeps_each_envs_history_across_resets():
     """Two worker envs, 4-step episodes, k = 2: s_{t-k} and s_0 of every env and step are read
     off that env's own embeddings, clamped at each episode's start, and the reward is the
@@ -64,6 +65,7 @@ def test_batched_env_keeps_each_envs_history_across_resets():
 
 @pytest.mark.parametrize(("utd_ratio", "expected_updates", "resume"),
                          [(1, 40, True), (0.5, 20, False)])
+@pytest.mark.slow
 def test_several_envs_insert_every_episode_keep_the_update_ratio_and_resume(
         tmp_path, utd_ratio, expected_updates, resume):
     """2 envs, 20-step episodes, 4 episodes = 40 vector steps. The first episodes end at vector
@@ -129,6 +131,7 @@ def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path, stage):
                 torch.testing.assert_close(other, eager, rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_compiled_sac_update_matches_the_eager_one(tmp_path):
     """compile.enabled compiles the SAC update (on a CPU too): from the same weights and seed,
     the compiled update takes the eager one's random draws (compile_options: fallback_random)
@@ -159,6 +162,7 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path):
         torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_compiled_run_gives_the_eager_runs_episodes(tmp_path):
     """The recipe with compile.enabled (the SAC updates, the head losses, the relabelling
     reward and the policy compiled) against the same run eager: 3 episodes of 20 steps with
