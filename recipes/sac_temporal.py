@@ -42,13 +42,13 @@ from tqdm import tqdm
 from temporal_torchrl.configs.rules import validate_recipe_config
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.encoders import Encoder
+from temporal_torchrl.rewards.config import uses_vlm_reward
 from temporal_torchrl.runs import (
     RunDirectory,
     override_keys,
     run_directory,
     run_sweep_job,
     sweep_job_config,
-    uses_vlm_reward,
 )
 from temporal_torchrl.training import (
     EpisodeAssembler,

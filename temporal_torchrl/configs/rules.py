@@ -32,7 +32,7 @@ from temporal_torchrl.configs.reward_quality import RewardQualityConfig
 from temporal_torchrl.encoders import ENCODERS
 from temporal_torchrl.envs import TASKS, baseline_text
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
-from temporal_torchrl.runs import none_or_name
+from temporal_torchrl.rewards.config import none_or_name
 
 _NOUNS = {int: ("an integer", "integers"), float: ("a number", "numbers"),
           str: ("a string", "strings")}

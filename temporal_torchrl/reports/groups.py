@@ -25,13 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from temporal_torchrl.envs import EVALUATION_TASKS
-from temporal_torchrl.runs import (
-    DEVICE_KEYS,
-    PROCESS_KEYS,
-    RESUMABLE_KEYS,
-    has_vlm_reward,
-    none_or_name,
-)
+from temporal_torchrl.rewards.config import has_vlm_reward, none_or_name
+from temporal_torchrl.runs import DEVICE_KEYS, PROCESS_KEYS, RESUMABLE_KEYS
 from temporal_torchrl.runs.layout import (
     flatten,
     protocol_name,

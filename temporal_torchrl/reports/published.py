@@ -28,7 +28,7 @@ from typing import Any
 import yaml
 
 from temporal_torchrl.reports.groups import uses_baseline
-from temporal_torchrl.runs import none_or_name
+from temporal_torchrl.rewards.config import none_or_name
 from temporal_torchrl.runs.layout import protocol_name
 
 DATA_FILE = Path(__file__).with_name("published_tables.yaml")

@@ -32,7 +32,7 @@ from temporal_torchrl.reports.aggregate import (
 from temporal_torchrl.reports.groups import RunGroup, distinguishing_keys
 from temporal_torchrl.reports.published import PUBLISHED_ENCODER, PublishedCell
 from temporal_torchrl.reports.reliable import Interval, ReliableTable, Scores, score_rule
-from temporal_torchrl.runs import has_vlm_reward
+from temporal_torchrl.rewards.config import has_vlm_reward
 
 CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "best", "status",
                "without_value", "published_tables", "published_mean",

@@ -2,10 +2,10 @@
 
 Its directory and files (:mod:`~temporal_torchrl.runs.directory`,
 :mod:`~temporal_torchrl.runs.layout`), its name (:mod:`~temporal_torchrl.runs.naming`), how it
-resumes and how sweep jobs find it (:mod:`~temporal_torchrl.runs.resume`), its reward from its
-config (:mod:`~temporal_torchrl.runs.reward`), and reading it back
-(:mod:`~temporal_torchrl.runs.readers`). The recipe writes runs through this package and the
-reports read them through it."""
+resumes and how sweep jobs find it (:mod:`~temporal_torchrl.runs.resume`), and reading it back
+(:mod:`~temporal_torchrl.runs.readers`; its reward is built by
+:func:`temporal_torchrl.rewards.reward_from_config`). The recipe writes runs through this
+package and the reports read them through it."""
 
 from temporal_torchrl.runs.checkpoint import (
     CHECKPOINT_VERSION,
@@ -55,13 +55,6 @@ from temporal_torchrl.runs.resume import (
     sweep_job_config,
     threads_per_job,
 )
-from temporal_torchrl.runs.reward import (
-    has_vlm_reward,
-    none_or_name,
-    reward_from_config,
-    reward_options,
-    uses_vlm_reward,
-)
 from temporal_torchrl.runs.sweep_job import SweepJobFailed, describe_exit, run_sweep_job
 
 __all__ = [
@@ -96,23 +89,18 @@ __all__ = [
     "default_run_dir",
     "find_runs",
     "flatten",
-    "has_vlm_reward",
     "load_episode",
     "load_reward",
     "load_run",
-    "none_or_name",
     "override_keys",
     "protocol_name",
     "read_successes",
     "resumed_config",
-    "reward_from_config",
-    "reward_options",
     "run_directory",
     "SweepJobFailed",
     "describe_exit",
     "run_sweep_job",
     "sweep_job_config",
     "threads_per_job",
-    "uses_vlm_reward",
     "write_json",
 ]

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from temporal_torchrl.rewards.config import uses_vlm_reward
 from temporal_torchrl.runs.layout import protocol_name
-from temporal_torchrl.runs.reward import uses_vlm_reward
 
 
 def default_run_dir(cfg: DictConfig) -> Path:

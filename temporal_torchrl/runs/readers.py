@@ -16,11 +16,11 @@ from typing import Any
 import torch
 
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.rewards.config import reward_from_config
 from temporal_torchrl.runs.checkpoint import Checkpoint
 from temporal_torchrl.runs.directory import RunDirectory
 from temporal_torchrl.runs.episode_log import EpisodeLog
 from temporal_torchrl.runs.layout import CHECKPOINT, CONFIG_FILE, EPISODES_FILE, SUMMARY_FILE
-from temporal_torchrl.runs.reward import reward_from_config
 
 #: Keys that tell the runs of one configuration apart (and put them in different table rows).
 RUN_KEYS = ("env.seed", "env.task")

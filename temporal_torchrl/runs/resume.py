@@ -12,10 +12,10 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from temporal_torchrl.rewards.config import uses_vlm_reward
 from temporal_torchrl.runs.directory import RunDirectory
 from temporal_torchrl.runs.layout import CONFIG_FILE, SUMMARY_FILE, flatten
 from temporal_torchrl.runs.naming import run_directory
-from temporal_torchrl.runs.reward import uses_vlm_reward
 
 
 def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig | None:
