@@ -790,6 +790,7 @@ def test_the_api_defaults_are_the_recipes():
         DirectionalLoss,
         PositionalRankingLoss,
     )
+    from temporal_torchrl.reward_quality.offline_finetuning import finetune_reward
     from temporal_torchrl.rewards import reward_options
     from temporal_torchrl.training import RewardHeadTrainer
 
@@ -806,4 +807,6 @@ def test_the_api_defaults_are_the_recipes():
     assert losses == {name: recipe[name] for name in losses}
     trainer = defaults(RewardHeadTrainer, ["batch_size", "lr", *losses])
     assert trainer == {name: recipe[name] for name in trainer}
+    offline = defaults(finetune_reward, ["batch_size", "lr", *losses])
+    assert offline == {name: recipe[name] for name in offline}
     assert HEADS_LEARNING_RATE == recipe["lr"]

@@ -8,6 +8,11 @@ means is documented once, in ``config.yaml``'s comments.
 
 The ``Shared*`` classes hold the keys ``recipes/evaluate_rewards.py`` shares with the training
 recipe (:mod:`temporal_torchrl.configs.reward_quality`), so both state them once.
+
+The ``reward.*`` defaults restate :mod:`temporal_torchrl.rewards.defaults` rather than import
+it: the schema is read where torch is not imported (Hydra composing a config, a Slurm launcher's
+submitting process), and ``temporal_torchrl.rewards`` imports torch. ``tests/test_rewards.py``
+holds the two equal, and ``tests/test_configs.py`` the schema and ``config.yaml``.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from torch import Tensor
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.objectives import HEADS_LEARNING_RATE
-from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.rewards import TemporalReward, defaults
 from temporal_torchrl.training import RewardHeadTrainer
 
 #: Finetuning stages (thesis 3.1.3): 1 from failed episodes only, 2 with successful ones too.
@@ -56,8 +56,9 @@ def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2
 
 def finetune_reward(reward: TemporalReward, buffer: EpisodeReplayBuffer,
                     goal_image_embedding: Tensor, *, updates: int, batch_size: int = 256,
-                    lr: float = HEADS_LEARNING_RATE, delta: float = 0.1,
-                    l2_margin: float = 0.2, same_position: bool = True) -> dict[str, float]:
+                    lr: float = HEADS_LEARNING_RATE, delta: float = defaults.DELTA,
+                    l2_margin: float = defaults.L2_MARGIN,
+                    same_position: bool = defaults.SAME_POSITION) -> dict[str, float]:
     """Train ``reward``'s heads in place for ``updates`` batches; returns the final losses.
 
     The updates are the training recipe's (:class:`~temporal_torchrl.training.RewardHeadTrainer`:
