@@ -10,9 +10,10 @@ The ``Shared*`` classes hold the keys ``recipes/evaluate_rewards.py`` shares wit
 recipe (:mod:`temporal_torchrl.configs.reward_quality`), so both state them once.
 
 The ``reward.*`` defaults restate :mod:`temporal_torchrl.rewards.defaults` rather than import
-it: the schema is read where torch is not imported (Hydra composing a config, a Slurm launcher's
-submitting process), and ``temporal_torchrl.rewards`` imports torch. ``tests/test_rewards.py``
-holds the two equal, and ``tests/test_configs.py`` the schema and ``config.yaml``.
+it: ``temporal_torchrl.configs`` registers the schemas without importing torch (a config is
+composed and checked in a fraction of a second), and ``temporal_torchrl.rewards`` imports torch.
+``tests/test_rewards.py`` holds the two equal, and ``tests/test_configs.py`` the schema and
+``config.yaml``.
 """
 
 from __future__ import annotations
