@@ -27,8 +27,3 @@ def one_torch_thread():
 def _seed_torch():
     torch.manual_seed(0)
 
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The tests marked ``slow`` first, each file's in their order: with pytest-xdist's workers
-    the longest tests then start at once rather than leave one worker running alone at the end."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
