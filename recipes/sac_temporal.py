@@ -47,9 +47,9 @@ from temporal_torchrl.runs import (
     RunDirectory,
     override_keys,
     run_directory,
-    run_sweep_job,
     sweep_job_config,
 )
+from temporal_torchrl.runs.sweep_job import run_sweep_job
 from temporal_torchrl.training import (
     EpisodeAssembler,
     MetricWindow,

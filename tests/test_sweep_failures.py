@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from helpers import QUICK, RECIPES, episode_csv_rows
 
-from temporal_torchrl.runs import describe_exit
+from temporal_torchrl.runs.sweep_job import describe_exit
 
 # Imported by each job's training process (reward.modules): after episode 2, while the marker
 # file exists, the seed-0 run raises and the seed-1 run writes its pid and waits to be killed.
@@ -86,6 +86,7 @@ def test_dead_jobs_are_named_and_a_relaunch_resumes_them(tmp_path):
     process = sweep(tmp_path, faults)
     output, _ = process.communicate(timeout=300)
     assert process.returncode == 0, output
+    assert "RuntimeWarning" not in output, output  # e.g. runpy's, were the job's module imported
     for seed in (0, 1):
         rows = episode_csv_rows(runs / f"seed{seed}")
         assert [int(row["episode"]) for row in rows] == [1, 2, 3, 4]

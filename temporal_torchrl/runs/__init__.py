@@ -5,7 +5,10 @@ Its directory and files (:mod:`~temporal_torchrl.runs.directory`,
 resumes and how sweep jobs find it (:mod:`~temporal_torchrl.runs.resume`), and reading it back
 (:mod:`~temporal_torchrl.runs.readers`; its reward is built by
 :func:`temporal_torchrl.rewards.reward_from_config`). The recipe writes runs through this
-package and the reports read them through it."""
+package and the reports read them through it.
+
+:mod:`~temporal_torchrl.runs.sweep_job` is imported by name, not from here: its child process
+runs it as ``python -m``, which warns when the package has imported the module already."""
 
 from temporal_torchrl.runs.checkpoint import (
     CHECKPOINT_VERSION,
@@ -55,7 +58,6 @@ from temporal_torchrl.runs.resume import (
     sweep_job_config,
     threads_per_job,
 )
-from temporal_torchrl.runs.sweep_job import SweepJobFailed, describe_exit, run_sweep_job
 
 __all__ = [
     "CHECKPOINT_VERSION",
@@ -97,9 +99,6 @@ __all__ = [
     "read_successes",
     "resumed_config",
     "run_directory",
-    "SweepJobFailed",
-    "describe_exit",
-    "run_sweep_job",
     "sweep_job_config",
     "threads_per_job",
     "write_json",
