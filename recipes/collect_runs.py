@@ -5,7 +5,7 @@
 
 Each finished run (it has a ``summary.json``) is copied with its config, summary, episode rows
 and logged metrics, under the same relative path; checkpoints and replay episodes stay in the
-sweep. The sweep's ``multirun.yaml`` comes along without the machine's paths
+sweep, as does Hydra's ``multirun.yaml``, which records only the sweep's latest launch
 (:mod:`temporal_torchrl.runs.collect`). Then: ``python recipes/report.py <folder> --out ...``.
 """
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import yaml
 
 from temporal_torchrl.reports.tables import relative_run_path
-from temporal_torchrl.runs.collect import collect_study, portable_multirun
+from temporal_torchrl.runs.collect import collect_study
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 #: Absolute paths of the kinds machines have (POSIX home, scratch and temporary folders).
@@ -33,11 +33,10 @@ def test_collect_copies_finished_runs_raw_files_only(tmp_path):
     make_run(sweep / "window-close" / "sac_stage2" / "seed0", finished=True)
     make_run(sweep / "window-close" / "sac_stage2" / "seed1", finished=False)
     make_run(sweep / "drawer-open" / "sac_stage2" / "seed0", finished=True)
-    cwd = tmp_path / "machine"
-    (sweep / "multirun.yaml").write_text(yaml.safe_dump({"hydra": {"runtime": {
-        "cwd": str(cwd), "config_sources": [{"path": f"{cwd}/recipes", "schema": "file"},
-                                            {"path": "hydra.conf", "schema": "pkg"}]},
-        "sweep": {"dir": "sweeps/study"}}}))
+    # The latest launch into the shared sweep folder was another study's.
+    (sweep / "multirun.yaml").write_text(yaml.safe_dump({"hydra": {
+        "runtime": {"cwd": str(tmp_path / "machine")},
+        "overrides": {"task": ["+study=another_study"]}}}))
 
     copied = collect_study(sweep, tmp_path / "results", ["window-close/*/*"])
 
@@ -46,15 +45,7 @@ def test_collect_copies_finished_runs_raw_files_only(tmp_path):
     assert sorted(path.relative_to(run).as_posix() for path in run.rglob("*")) == [
         "config.json", "episodes.csv", "logs", "logs/seed0", "logs/seed0/scalars",
         "logs/seed0/scalars/loss.csv", "metrics.jsonl", "summary.json"]
-    multirun = yaml.safe_load((tmp_path / "results" / "multirun.yaml").read_text())
-    assert "cwd" not in multirun["hydra"]["runtime"]
-    assert [source["path"] for source in multirun["hydra"]["runtime"]["config_sources"]] == [
-        "recipes", "hydra.conf"]
-    assert multirun["hydra"]["sweep"]["dir"] == "sweeps/study"
-
-
-def test_portable_multirun_leaves_a_file_without_cwd_as_it_is():
-    assert yaml.safe_load(portable_multirun("a: /x/y\n")) == {"a": "/x/y"}
+    assert sorted(path.name for path in (tmp_path / "results").iterdir()) == ["window-close"]
 
 
 def test_run_paths_are_relative_to_the_folders_given(tmp_path):

@@ -3,8 +3,10 @@
 A finished run's raw files are what the reports read: its config, summary, episode rows and
 logged metrics (``metrics.jsonl`` and the CSV logger's ``logs/``). Its checkpoints and replay
 episodes (megabytes a run, needed only to resume it or to plot its reward curves) stay in the
-sweep. Hydra's ``multirun.yaml`` is copied with this machine's paths taken out of it, so that no
-committed file names a machine's folders.
+sweep. Hydra's ``multirun.yaml`` is not copied: a sweep folder holds one, which each launch
+rewrites with its own overrides, while a study's runs may come from several launches and share the
+folder with other studies' runs, so the file would record whichever launch came last. A run's
+``config.json`` is the whole resolved config it ran; the study's README names its launches.
 """
 
 from __future__ import annotations
@@ -12,16 +14,12 @@ from __future__ import annotations
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
-
-from omegaconf import OmegaConf
 
 from temporal_torchrl.runs.layout import CONFIG_FILE, EPISODES_FILE, METRICS_FILE, SUMMARY_FILE
 
 #: What a committed run holds: files, then folders.
 RAW_FILES = (CONFIG_FILE, SUMMARY_FILE, EPISODES_FILE, METRICS_FILE)
 RAW_FOLDERS = ("logs",)
-MULTIRUN_FILE = "multirun.yaml"
 
 
 def finished_runs(sweep: Path, patterns: Sequence[str] = ("**",)) -> list[Path]:
@@ -48,42 +46,14 @@ def copy_raw_files(run: Path, destination: Path) -> list[Path]:
     return copied
 
 
-def portable_multirun(text: str) -> str:
-    """Hydra's ``multirun.yaml`` without the machine's paths: the working directory it records
-    is dropped, and every string under it is made relative to it."""
-    config = OmegaConf.create(text)
-    cwd = OmegaConf.select(config, "hydra.runtime.cwd")
-    container = OmegaConf.to_container(config, resolve=False)
-    if cwd:
-        prefix = str(cwd).rstrip("/") + "/"
-
-        def relative(value: Any) -> Any:
-            if isinstance(value, dict):
-                return {key: relative(item) for key, item in value.items()}
-            if isinstance(value, list):
-                return [relative(item) for item in value]
-            if isinstance(value, str) and (value == cwd or value.startswith(prefix)):
-                return value[len(prefix):] or "."
-            return value
-
-        container = relative(container)
-        del container["hydra"]["runtime"]["cwd"]
-    return OmegaConf.to_yaml(OmegaConf.create(container))
-
-
 def collect_study(sweep: Path, destination: Path,
                   patterns: Sequence[str] = ("**",)) -> list[Path]:
     """Copy every finished run of ``sweep`` that matches ``patterns`` into ``destination`` under
-    the same relative paths, and the sweep's ``multirun.yaml`` (its latest launch) without
-    machine paths; returns the runs copied (in ``destination``)."""
+    the same relative paths; returns the runs copied (in ``destination``)."""
     sweep, destination = Path(sweep), Path(destination)
     copied = []
     for run in finished_runs(sweep, patterns):
         target = destination / run.relative_to(sweep)
         copy_raw_files(run, target)
         copied.append(target)
-    if (sweep / MULTIRUN_FILE).is_file():
-        destination.mkdir(parents=True, exist_ok=True)
-        (destination / MULTIRUN_FILE).write_text(
-            portable_multirun((sweep / MULTIRUN_FILE).read_text()))
     return copied
