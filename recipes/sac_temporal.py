@@ -113,6 +113,9 @@ def build(start: RunStart, run: RunDirectory) -> Training:
     reward = factories.make_reward(cfg, encoder) if encoder is not None else None
     env = factories.make_environment(cfg, encoder, reward)
     print(f"run directory: {run.path}")
+    if saved is not None:  # a killed run's log shows where it went on from
+        print(f"resumed: after episode {saved.episode:,} of {cfg.train.episodes:,} "
+              f"({saved.env_steps:,} env steps, {saved.updates:,} SAC updates)")
     print(factories.describe_encoder(cfg, encoder))
 
     # ---- stage 2's preloaded positives and the goal image s_g (a resume has them saved)

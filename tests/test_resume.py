@@ -425,6 +425,7 @@ def test_killed_process_resumes(tmp_path):
                               f"train.stop_after_episodes={done + 1}", "train.progress=false"],
                              capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert f"resumed: after episode {done:,} of 1,000 ({20 * done:,} env steps" in resumed.stdout
     assert not (run_dir / "summary.json").exists()
     # A train.episodes given on the command line ends the run there.
     finished = subprocess.run([*args, f"train.episodes={done + 2}", "resume=true"],
