@@ -14,7 +14,6 @@ from temporal_torchrl.rewards import POSITIONAL, unregister_reward
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 # The recipe on a tiny run (as tests/test_recipe.py): 20-step episodes, small networks.
 TINY_RUN = [

@@ -10,8 +10,6 @@ from torch._inductor.decomposition import select_decomp_table
 
 from temporal_torchrl.modules import ReLU, relu
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
 
 def layer(activation, train_second: bool = True):
     """A linear layer then ``activation`` then a second linear layer (the heads' MLP shape);

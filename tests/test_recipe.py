@@ -17,9 +17,6 @@ import temporal_torchrl.training.episodes as episodes_module
 from temporal_torchrl.runs import RunDirectory, default_run_dir
 from temporal_torchrl.training import factories
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
-
 VARIANTS = [("none", "none"), ("liv", "none"), ("furl", "none"), ("p1", "none"),
             ("p2", "none"), ("p3", "none"), ("p4", "none"), ("furl", "d1"), ("furl", "d2"),
             ("furl", "d3"), ("furl", "d4"), ("furl", "d5"), ("furl", "d_certainty"),

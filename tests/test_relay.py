@@ -16,8 +16,6 @@ from temporal_torchrl.objectives import StackedCriticSACLoss
 from temporal_torchrl.runs import RunDirectory
 from temporal_torchrl.training.relay import RELAY_PERIODS, RelayPolicy, RelaySchedule
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
 
 def release_agents(lengths, periods):
     """The release's loop (train_furl.py) written out: ``policies[(ep_step // relay_freq) % 2]``

@@ -63,7 +63,6 @@ SEED0 = [False] * 150 + [True] * 150
 SEED1 = [False] * 160 + [True, False] * 70
 
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @cache

@@ -40,8 +40,6 @@ from temporal_torchrl.runs import (
 )
 from temporal_torchrl.training import factories
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
 # ---- faults: kills, truncated and unreadable files, a second writer
 
 EPISODES = 12

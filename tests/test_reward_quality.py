@@ -36,7 +36,6 @@ RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 
 
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 # --------------------------------------------------------------------------- metrics

@@ -9,8 +9,6 @@ from torchrl.modules import MLP, ValueOperator
 from temporal_torchrl.objectives import StackedQValueNetwork
 from temporal_torchrl.training import factories
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
 
 def test_sac_update_matches_torchrls_sac_loss(tmp_path):
     """The recipe's SAC update (stacked critics, only SAC's keys) against TorchRL's SACLoss as

@@ -14,8 +14,6 @@ from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
 from temporal_torchrl.runs import RunDirectory
 from temporal_torchrl.training import factories
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
-
 
 def forget_compiled_graphs() -> None:
     """Empty dynamo's caches and counters: a function compiled after this makes new graphs
