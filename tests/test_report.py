@@ -4,7 +4,6 @@ directories with known success sequences, and one tiny real run for the reward c
 import csv
 import json
 import math
-import os
 import subprocess
 import sys
 from functools import cache
@@ -546,7 +545,7 @@ def test_report_cli_end_to_end(tmp_path, real_run):
     result = subprocess.run(
         [sys.executable, str(RECIPES / "report.py"), str(sweep), "--out", str(out),
          "--metrics", "sac/loss_qvalue", "--figure-run", str(real_run), "--bootstrap", "300"],
-        capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     assert "## Configurations" in result.stdout
     for name in ("success_curves.png", "metric_sac-loss_qvalue.png", "reward_curves.png",
@@ -636,6 +635,6 @@ def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
     result = subprocess.run(
         [sys.executable, str(RECIPES / "report.py"), str(run_dir), "--out", str(out),
          "--figure-run", str(run_dir), "--bootstrap", "200"],
-        capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     assert (out / "reward_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
