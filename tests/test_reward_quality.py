@@ -35,9 +35,6 @@ from temporal_torchrl.rewards import (
 RECIPES = Path(__file__).resolve().parents[1] / "recipes"
 
 
-
-
-
 # --------------------------------------------------------------------------- metrics
 def test_value_order_correlation_of_rising_falling_and_tied_rewards():
     assert value_order_correlation(torch.tensor([0.1, 0.3, 0.35, 0.9])) == pytest.approx(1.0)

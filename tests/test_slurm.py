@@ -41,7 +41,7 @@ def _no_cluster() -> str | None:
 pytestmark = [pytest.mark.slurm,
               pytest.mark.skipif(_no_cluster() is not None, reason=str(_no_cluster()))]
 
-EPISODES = 15
+EPISODES = 15  # the cancel follows the first checkpoint (episode 1): it lands well before 15
 STEPS = 20  # per episode (the cancel is a SIGKILL: it lands mid-run however short they are)
 #: The recipe tests' tiny run, but for its length.
 TINY = [override for override in QUICK
