@@ -4,6 +4,8 @@
     python recipes/report.py runs/door-open runs/push --out reports/two --metrics sac/loss_qvalue
     python recipes/report.py runs/ --out reports/all --figure-run runs/door-open/<config>/seed0
     python recipes/report.py sweeps/table_5_12 --out reports/t --baseline "FuRL ρ=0.05"
+    python recipes/report.py docs/results/*/runs --out reports/t --thesis-table 5.12 \
+        --compare "FuRL ρ=1" SAC
 
 Finds every run directory (a directory with ``config.json``) under the given directories,
 groups runs that differ only in the seed (printing the config keys that tell the groups apart)
@@ -14,12 +16,17 @@ and writes into ``--out``:
   thesis's published value and the difference beside the configurations it reports;
 - ``aggregates.md``/``.csv``: per metric and configuration, over all its tasks and seeds, the
   IQM and mean of normalised scores and the probability of improvement over ``--baseline``
-  (default SAC), each with a 95% stratified-bootstrap CI, computed with rliable
+  (default SAC) and P(X > Y) for each ``--compare X Y``, each with a 95% stratified-bootstrap
+  CI, computed with rliable
   (:mod:`temporal_torchrl.reports.reliable`; scores: RAS / 100, and 1 - TTFS / 1000 with
   runs that have not reached the success scored 0);
 - ``aggregate_<metric>.png`` (IQM and mean with their CIs), ``performance_profiles.png``
   (fraction of runs above each score, with CI bands) and ``probability_of_improvement.png``,
   drawn with ``rliable.plot_utils``;
+- ``table_<number>.md``/``.csv`` with ``--thesis-table``: the runs laid out as that thesis
+  table, ours beside the thesis in every cell, "not run" where we did not, the averages over the
+  tasks run and each compared with the thesis (:mod:`temporal_torchrl.reports.thesis_table`);
+  ``report.md`` leads with it;
 - ``runs.csv``: every run with its episodes and metrics (or why it has none yet);
 - ``success_curves.png``: running-average success (window 150) per task and configuration;
 - ``metric_<key>.png`` for each ``--metrics`` key (from the runs' ``metrics.jsonl``; older runs:
@@ -67,6 +74,12 @@ from temporal_torchrl.reports.tables import (
     table_rows,
     write_csv,
 )
+from temporal_torchrl.reports.thesis_table import (
+    THESIS_TABLE_COLUMNS,
+    build_thesis_table,
+    thesis_table_markdown,
+    thesis_table_rows,
+)
 from temporal_torchrl.runs import find_runs, load_run
 
 HOW_TO_READ = """\
@@ -75,12 +88,19 @@ HOW_TO_READ = """\
 - RAS (%) is RAS(e; w = 150) at the task's budget e (thesis Table 5.1). A run short of its budget
   is *incomplete*: shown with its episode count, never scored.
 - TTFS / TT50S are the episode of the first / 50th success. A run that reached 1,000 episodes
-  without it counts 1,000 (the thesis's convention); a shorter run without it is *censored*
-  (`> N ep`: not reached in its N episodes) and is not averaged.
-- A cell's mean ± sample std and its n are over the runs that have a value, as the thesis
-  prints them. With a few seeds a mean says little: the rliable section gives intervals.
+  without it counts 1,000 (the thesis's convention). A shorter run without it is *censored*
+  (`> N ep`: not reached in its N episodes) and counts 1,000 too, so that a mean is not made
+  of the fast runs alone; such a mean is an upper bound, and its cell gives the median beside
+  it (undetermined where it depends on the censored runs).
+- A cell's mean ± sample std and its n are over its runs, as the thesis prints them. With a
+  few seeds a mean says little: the comparisons with the thesis and the rliable section give
+  intervals.
 - The thesis's values are LIV's (4 seeds); runs with another encoder are compared with them
-  all the same, and the Note column says so.
+  all the same, and the Note column says so. A difference from the thesis comes with its 95%
+  interval, the thesis's mean counted as 4 seeds with a spread like ours where it prints no
+  std, and a reading: *agrees* (the interval includes 0; its half-width says how precisely),
+  *not resolved* (it excludes 0, the interval over every cell compared does not) or *does not
+  agree* (both exclude 0).
 - *Over tasks and seeds (rliable)*: each configuration's runs on all its tasks, scored in
   [0, 1] (higher is better): RAS / 100; for TTFS and TT50S, 1 − TTFS / 1000, with a run that
   has not reached the success (within 1,000 episodes, or censored before) scored 0, a lower
@@ -110,6 +130,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the configuration the probability of improvement compares with, "
                              f"by its label as printed (default {DEFAULT_BASELINE!r}; when no "
                              "configuration has it, the report says so)")
+    parser.add_argument("--compare", nargs=2, action="append", default=[],
+                        metavar=("X", "Y"),
+                        help="also give P(X > Y) for these two configurations, by their labels "
+                             "as printed (repeatable)")
+    parser.add_argument("--thesis-table", default=None, metavar="NUMBER",
+                        help="lay the runs out as this thesis table (e.g. 5.12), ours beside "
+                             "the thesis, and lead the report with it")
     parser.add_argument("--bootstrap", type=int, default=2000,
                         help="stratified-bootstrap resamples for the 95%% CIs (default 2000)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
@@ -151,6 +178,15 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"--baseline {args.baseline!r}: no configuration has that label; "
                          f"the configurations are: {'; '.join(map(repr, labels))}.")
     baseline = args.baseline or DEFAULT_BASELINE
+    for label in {label for pair in args.compare for label in pair} - set(labels):
+        raise SystemExit(f"--compare {label!r}: no configuration has that label; the "
+                         f"configurations are: {'; '.join(map(repr, labels))}.")
+    page = None
+    if args.thesis_table is not None:
+        try:
+            page = build_thesis_table(groups, args.thesis_table)
+        except ValueError as error:
+            raise SystemExit(f"--thesis-table {args.thesis_table}: {error}") from None
     scalars = {run.path: logged_scalars(run.path) for group in groups for run in group.runs
                if args.metrics}
     logged = set().union(*scalars.values())
@@ -165,6 +201,13 @@ def main(argv: list[str] | None = None) -> None:
                                    baseline=baseline),
                 grouping_markdown(groups)]
     print(grouping_markdown(groups))
+    if page is not None:
+        name = "table_" + page.table.number.replace(".", "_")
+        markdown = thesis_table_markdown(page)
+        (args.out / f"{name}.md").write_text(markdown)
+        write_csv(args.out / f"{name}.csv", thesis_table_rows(page), THESIS_TABLE_COLUMNS)
+        sections.insert(4, markdown)  # the report leads with it, before how to read it
+        print(markdown)
 
     for metric in METRICS:
         table = build_table(groups, metric)
@@ -176,7 +219,8 @@ def main(argv: list[str] | None = None) -> None:
     write_csv(args.out / "runs.csv", run_rows(groups, args.dirs), RUN_COLUMNS)
 
     reliable = [build_reliable_table(groups, metric, baseline=baseline, reps=args.bootstrap,
-                                     seed=args.seed) for metric in METRICS]
+                                     seed=args.seed, pairs=[tuple(pair) for pair in args.compare])
+                for metric in METRICS]
     aggregates = "\n".join(["## Over tasks and seeds (rliable)", "",
                             *map(reliable_markdown, reliable)])
     (args.out / "aggregates.md").write_text(aggregates)

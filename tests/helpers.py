@@ -2,6 +2,8 @@
 and waits that fail the test, naming what did not happen, instead of hanging or carrying on."""
 
 import csv
+import functools
+import json
 import os
 import select
 import signal
@@ -11,6 +13,7 @@ from pathlib import Path
 
 import torch
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
@@ -164,3 +167,42 @@ def make_checkpoint(**fields):
                 "trainer": {}, "relay": {}, "goal_image": None, "buffer_capacity": 0,
                 "expert_rows": 0, "preloaded": 0, "rng": {}}
     return Checkpoint(**(defaults | fields))
+
+
+# --------------------------------------------------------------------------- run directories
+# seed 0: 150 failures then 150 successes -> RAS(300; 150) = 100 %, TTFS 151, TT50S 200.
+SEED0 = [False] * 150 + [True] * 150
+# seed 1: 160 failures then success, failure, ... -> 70 of episodes 151..300: RAS 46.67 %,
+# TTFS 161, TT50S 161 + 2 * 49 = 259.
+SEED1 = [False] * 160 + [True, False] * 70
+
+
+@functools.cache
+def _composed(overrides: tuple[str, ...]) -> str:
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        cfg = compose("config", overrides=list(overrides))
+    return json.dumps(OmegaConf.to_container(cfg, resolve=True))
+
+
+def make_run(root: Path, name: str, successes, *overrides: str, finished: bool = False,
+             logged: dict | None = None) -> Path:
+    """A run directory as the recipe writes it: config.json, episodes.csv, summary.json when
+    ``finished``, CSV logs of ``logged`` ({key: [(step, value)]})."""
+    run_dir = root / name
+    run_dir.mkdir(parents=True)
+    config = json.loads(_composed(tuple(overrides)))
+    config["output_dir"] = str(run_dir)
+    (run_dir / "config.json").write_text(json.dumps(config))
+    with (run_dir / "episodes.csv").open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["episode", "env_steps", "success", "return", "mean_vlm_reward",
+                         "stage"])
+        for episode, success in enumerate(successes, start=1):
+            writer.writerow([episode, 500 * episode, int(success), -500 + int(success), 0.0, 2])
+    if finished:
+        (run_dir / "summary.json").write_text(json.dumps({"episodes": len(successes)}))
+    for key, points in (logged or {}).items():
+        path = run_dir / "logs" / run_dir.name / "scalars" / f"{key}.csv"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("".join(f"{step},{value}\n" for step, value in points))
+    return run_dir

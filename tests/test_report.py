@@ -6,17 +6,15 @@ import json
 import math
 import subprocess
 import sys
-from functools import cache
-from pathlib import Path
 
 import numpy as np
 import pytest
 import report
 import sac_temporal
 import torch
-from helpers import config
+from helpers import RECIPES, SEED0, SEED1, config, make_run
 from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
+from scipy import stats as scipy_stats
 
 from temporal_torchrl.data import NEGATIVE
 from temporal_torchrl.envs import EVALUATION_TASKS, get_task
@@ -51,47 +49,6 @@ from temporal_torchrl.reports.tables import (
 )
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.runs import find_runs
-
-RECIPES = Path(__file__).resolve().parents[1] / "recipes"
-
-
-# seed 0: 150 failures then 150 successes -> RAS(300; 150) = 100 %, TTFS 151, TT50S 200.
-SEED0 = [False] * 150 + [True] * 150
-# seed 1: 160 failures then success, failure, ... -> 70 of episodes 151..300: RAS 46.67 %,
-# TTFS 161, TT50S 161 + 2 * 49 = 259.
-SEED1 = [False] * 160 + [True, False] * 70
-
-
-@cache
-def _composed(overrides: tuple[str, ...]) -> str:
-    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
-        cfg = compose("config", overrides=list(overrides))
-    return json.dumps(OmegaConf.to_container(cfg, resolve=True))
-
-
-def make_run(root: Path, name: str, successes, *overrides: str, finished: bool = False,
-             logged: dict | None = None) -> Path:
-    """A run directory as the recipe writes it: config.json, episodes.csv, summary.json when
-    ``finished``, CSV logs of ``logged`` ({key: [(step, value)]})."""
-    run_dir = root / name
-    run_dir.mkdir(parents=True)
-    config = json.loads(_composed(tuple(overrides)))
-    config["output_dir"] = str(run_dir)
-    (run_dir / "config.json").write_text(json.dumps(config))
-    with (run_dir / "episodes.csv").open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(["episode", "env_steps", "success", "return", "mean_vlm_reward",
-                         "stage"])
-        for episode, success in enumerate(successes, start=1):
-            writer.writerow([episode, 500 * episode, int(success), -500 + int(success), 0.0, 2])
-    if finished:
-        (run_dir / "summary.json").write_text(json.dumps({"episodes": len(successes)}))
-    for key, points in (logged or {}).items():
-        path = run_dir / "logs" / run_dir.name / "scalars" / f"{key}.csv"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text("".join(f"{step},{value}\n" for step, value in points))
-    return run_dir
-
 
 FURL = ("preset=furl", "protocol=stage2")
 
@@ -165,8 +122,28 @@ def test_ttfs_censored_below_the_horizon_and_capped_at_it(tmp_path):
     assert run_value(few_run, "ttfs").value == 1
     assert run_value(few_run, "tt50s").status == CENSORED
     table = build_table(group_runs(find_runs([tmp_path])), "ttfs")
+    # The censored run counts 1,000 (values 1, 1000, 1000); the median is the censored run's
+    # own value, somewhere in (120, 1000]: undetermined.
     assert markdown_row(table_markdown(table), "drawer-open")[1] == \
-        "500 ± 706 (n=2); 1 censored: > 120 ep"
+        "**667 ± 577** (n=3; 1 censored > 120 ep, counted 1000; median undetermined)"
+
+
+def test_median_beside_a_censored_mean_when_determined(tmp_path):
+    # TT50S of four 200-episode runs: 120, 150, 180 and one censored > 200. Counted at 1,000
+    # the mean is (120 + 150 + 180 + 1000) / 4; the median is 165 whatever the censored run's
+    # value in (200, 1000], since it lies above the other three.
+    for seed, first in enumerate((70, 100, 130)):
+        make_run(tmp_path, f"s{seed}", [False] * first + [True] * (200 - first), *FURL,
+                 f"env.seed={seed}")
+    make_run(tmp_path, "s3", [True] * 40 + [False] * 160, *FURL, "env.seed=3")
+    [group] = group_runs(find_runs([tmp_path]))
+    cell = build_table([group], "tt50s").cells["drawer-open", group.label]
+    assert [value.value for value in cell.runs[:3]] == [120, 150, 180]
+    assert cell.mean == pytest.approx((120 + 150 + 180 + 1000) / 4)
+    assert cell.std == pytest.approx(np.std([120, 150, 180, 1000], ddof=1))
+    assert (cell.median, cell.median_censored) == (165.0, False)
+    assert "1 censored > 200 ep, counted 1000; median 165" in table_markdown(
+        build_table([group], "tt50s"))
 
 
 def test_runs_differing_in_rho_are_never_merged(tmp_path):
@@ -185,9 +162,18 @@ def test_runs_differing_in_rho_are_never_merged(tmp_path):
 
 def test_same_configuration_and_seed_twice_is_refused(tmp_path):
     make_run(tmp_path, "a", SEED0, *FURL)
-    make_run(tmp_path, "copy", SEED0, *FURL)
+    make_run(tmp_path, "other", SEED1, *FURL)  # env.seed 0 too, other episodes
     with pytest.raises(ValueError, match="count that seed twice"):
         group_runs(find_runs([tmp_path]))
+
+
+def test_a_run_copied_into_two_studies_counts_once(tmp_path):
+    make_run(tmp_path / "study_a", "s0", SEED0, *FURL, "env.seed=0")
+    make_run(tmp_path / "study_b", "s0", SEED0, *FURL, "env.seed=0")
+    make_run(tmp_path / "study_b", "s1", SEED1, *FURL, "env.seed=1")
+    [group] = group_runs(find_runs([tmp_path / "study_a", tmp_path / "study_b"]))
+    assert [(run.seed, run.path.parent.name) for run in group.runs] == [(0, "study_a"),
+                                                                       (1, "study_b")]
 
 
 def test_labels_read_like_the_thesis(tmp_path):
@@ -273,8 +259,16 @@ def test_published_value_matched_and_difference(tmp_path):
     assert float(furl["difference"]) == pytest.approx((100 + 70 / 150 * 100) / 2 - 41.7)
     assert rows["P2 ρ=0.1 (b_g) [liv]"]["published_mean"] == ""  # rho 0.1: not in the thesis
     markdown = table_markdown(table)
-    assert ("| FuRL ρ=0.05 [metaworld_small] | drawer-open | 73.3 ± 37.7 (n=2) | 41.7 | +31.6 "
+    # Welch's interval, the thesis's 4 seeds given our spread (it prints no std), computed by
+    # scipy on a stand-in sample with the thesis's mean and our std.
+    ours = np.array([100.0, 70 / 150 * 100])
+    stand_in = 41.7 + (np.array([-1.0, 1.0, -1.0, 1.0]) * ours.std(ddof=1)
+                       * math.sqrt(3 / 4))
+    low, high = scipy_stats.ttest_ind(ours, stand_in, equal_var=False).confidence_interval()
+    assert ("| FuRL ρ=0.05 [metaworld_small] | drawer-open | 73.3 ± 37.7 (n=2) | 41.7 | "
+            f"+31.6 [{low:+.1f}, {high:+.1f}]: agrees (±{(high - low) / 2:.1f}) "
             "| 5.4, 5.5, 5.6 | encoder metaworld_small (thesis: liv) |") in markdown
+    assert "with a spread like ours where the thesis prints no std" in markdown
     # stage 1 with D3 matches Table 5.2, whose baseline the thesis does not state
     make_run(tmp_path, "d3", [False] * 270 + [True], "preset=d3", "protocol=stage1",
              "reward.baseline=generic")
@@ -576,8 +570,10 @@ def test_report_cli_end_to_end(tmp_path, real_run):
     with (out / "runs.csv").open() as file:
         assert len(list(csv.DictReader(file))) == 5
     ttfs = (out / "ttfs.md").read_text()
-    assert markdown_row(ttfs, "drawer-open")[1:] == ["1 censored: > 300 ep",
-                                                "156 ± 7 (n=2); 1 censored: > 40 ep"]
+    # SAC's one run is censored at 300 episodes, FuRL's seed 2 at 40: both count 1,000
+    assert markdown_row(ttfs, "drawer-open")[1:] == [
+        "1000 (n=1; 1 censored > 300 ep, counted 1000; median undetermined)",
+        "**437 ± 487** (n=3; 1 censored > 40 ep, counted 1000; median undetermined)"]
     report = (out / "report.md").read_text()
     assert "![running-average success](success_curves.png)" in report
     assert "(reward_curves.png)" in report

@@ -9,10 +9,16 @@ Each run gives a metric only when it has it (:func:`run_value`):
   it is *censored*: its value is only known to exceed its episode count, and it is shown so.
 
 A cell (one configuration on one task) holds the runs' values: the mean and the sample std
-(n - 1), as the thesis prints them, over the runs that have a value; runs without one are listed
-with the cell, never averaged in. The Average row is the mean of the task means, as in the
-thesis, given only when a configuration has complete cells on every task of the table. Interval
-estimates are :mod:`~temporal_torchrl.reports.reliable`'s (rliable), over tasks and seeds.
+(n - 1), as the thesis prints them. A censored run counts at the horizon (1,000 episodes), as the
+thesis's tables count a run that never succeeded: leaving it out would credit the configuration
+with its fastest runs only. Such a mean is an upper bound of the one the runs would give at
+1,000 episodes, so the cell says how many runs it counted so and gives the median beside it
+(where it does not depend on the censored runs' unknown values). Runs
+without a value (RAS incomplete or undefined) are listed with the cell, never averaged in. The
+Average row is the mean of the task means, as in the thesis, given only when a configuration has
+complete cells on every task of the table. Interval estimates are
+:mod:`~temporal_torchrl.reports.reliable`'s (rliable), over tasks and seeds, and
+:mod:`~temporal_torchrl.reports.thesis_comparison`'s against the thesis.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from temporal_torchrl.reports.published import (
     PublishedResult,
     find_published,
 )
+from temporal_torchrl.reports.thesis_comparison import ThesisComparison, compare_with_thesis
 from temporal_torchrl.runs.readers import Run
 
 #: A run has the metric.
@@ -117,21 +124,32 @@ def run_value(run: Run, metric: str, *, window: int = DEFAULT_WINDOW,
 class Cell:
     """One configuration on one task: its runs' values and their statistics.
 
-    ``mean`` and ``std`` (sample, n - 1) are over the runs with a value (``std`` None below 2
-    values, both None without any); ``pending`` lists the runs without one.
+    ``mean``, ``std`` (sample, n - 1) and ``median`` are over the runs with a value and the
+    censored runs counted at the horizon (``std`` None below 2 of them, all None without any);
+    ``median_censored``: the median depends on a censored run's unknown value.
+    ``pending`` lists the runs without a value (RAS incomplete or undefined).
     """
 
     runs: tuple[RunValue, ...]
     mean: float | None
     std: float | None
+    median: float | None = None
+    median_censored: bool = False
+    horizon: int = DEFAULT_HORIZON
 
     @property
     def values(self) -> list[float]:
-        return [run.value for run in self.runs if run.status == VALUE]
+        """The values the statistics are over: censored runs count as the horizon."""
+        return [run.value if run.status == VALUE else float(self.horizon)
+                for run in self.runs if run.status in (VALUE, CENSORED)]
+
+    @property
+    def censored(self) -> list[RunValue]:
+        return [run for run in self.runs if run.status == CENSORED]
 
     @property
     def pending(self) -> list[RunValue]:
-        return [run for run in self.runs if run.status != VALUE]
+        return [run for run in self.runs if run.status not in (VALUE, CENSORED)]
 
     @property
     def complete(self) -> bool:
@@ -139,13 +157,22 @@ class Cell:
         return bool(self.runs) and not self.pending
 
 
-def make_cell(runs: Sequence[Run], metric: str) -> Cell:
+def make_cell(runs: Sequence[Run], metric: str, *, horizon: int = DEFAULT_HORIZON) -> Cell:
     """The cell of ``runs`` (one configuration, one task) for ``metric``."""
-    values = [run_value(run, metric) for run in runs]
-    present = [value.value for value in values if value.status == VALUE]
-    return Cell(tuple(values),
-                mean=float(np.mean(present)) if present else None,
-                std=float(np.std(present, ddof=1)) if len(present) > 1 else None)
+    values = tuple(run_value(run, metric, horizon=horizon) for run in runs)
+    counted = [value.value if value.status == VALUE else float(horizon)
+               for value in values if value.status in (VALUE, CENSORED)]
+    if not counted:
+        return Cell(values, None, None, horizon=horizon)
+    # A censored run's value lies in (its episodes, horizon]: the median is determined when it
+    # is the same at both ends.
+    earliest = [value.value if value.status == VALUE else float(value.run.episodes + 1)
+                for value in values if value.status in (VALUE, CENSORED)]
+    median = float(np.median(counted))
+    return Cell(values, mean=float(np.mean(counted)),
+                std=float(np.std(counted, ddof=1)) if len(counted) > 1 else None,
+                median=median, median_censored=float(np.median(earliest)) != median,
+                horizon=horizon)
 
 
 @dataclass(frozen=True)
@@ -181,6 +208,26 @@ class MetricTable:
         rounded = {label: round(mean, self.metric.decimals) for label, mean in means.items()}
         best = (max if self.metric.higher_is_better else min)(rounded.values())
         return {label for label, mean in rounded.items() if mean == best}
+
+    def thesis_comparisons(self) -> dict[tuple[str, str], ThesisComparison]:
+        """``(task, label) -> ThesisComparison`` for each complete cell of 2 or more runs that
+        the thesis reports, its table-wide interval over all of them; cells whose runs and the
+        thesis all have one value (no seed error) are left out."""
+        compared = []
+        for group in self.groups:
+            result = self.published.get(group.label)
+            for task in self.tasks:
+                cell = self.cells.get((task, group.label))
+                if result is None or cell is None or task not in result.cells \
+                        or not cell.complete or len(cell.values) < 2:
+                    continue
+                published = result.cells[task]
+                if cell.std == 0.0 and not published.std:
+                    continue
+                compared.append(((task, group.label), cell, published))
+        return {key: compare_with_thesis(cell.values, published.mean, published.std,
+                                         cells=len(compared))
+                for key, cell, published in compared}
 
 
 def build_table(groups: Sequence[RunGroup], metric: str) -> MetricTable:

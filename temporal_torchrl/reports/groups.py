@@ -7,7 +7,8 @@ run has too; ``summary.json`` is there only once the run has finished.
 
 Runs are grouped into *configurations*: runs whose configs are equal once the seed, the task and
 the keys about the process that ran them (:data:`NON_CONFIGURATION_KEYS`) are left out. Seeds of one
-configuration are averaged; runs that differ in anything else never are.
+configuration are averaged; runs that differ in anything else never are. A run found twice with
+the same episodes (one run copied into two studies' folders) counts once.
 
 Example:
     >>> runs = find_runs(["runs/door-open"])                       # doctest: +SKIP
@@ -21,7 +22,6 @@ import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from temporal_torchrl.envs import EVALUATION_TASKS
@@ -168,8 +168,8 @@ def distinguishing_keys(settings: Sequence[Mapping[str, Any]]) -> list[str]:
 def group_runs(runs: Sequence[Run]) -> list[RunGroup]:
     """Group ``runs`` by configuration (see module doc), with unique thesis-like labels.
 
-    Raises ``ValueError`` when two runs share configuration, task and seed: averaging both would
-    count that seed twice.
+    Raises ``ValueError`` when two runs share configuration, task and seed but not their
+    episodes: averaging both would count that seed twice. (Copies of one run count once.)
     """
     by_settings: dict[str, list[Run]] = {}
     for run in runs:
@@ -191,15 +191,16 @@ def group_runs(runs: Sequence[Run]) -> list[RunGroup]:
     groups = []
     for label, each, members in zip(labels, settings, by_settings.values(), strict=True):
         members = sorted(members, key=lambda run: (task_order(run.task), run.seed))
-        seen: dict[tuple[str, int], Path] = {}
+        seen: dict[tuple[str, int], Run] = {}
         for run in members:
-            other = seen.setdefault((run.task, run.seed), run.path)
-            if other != run.path:
-                raise ValueError(f"{other} and {run.path} are the same configuration, task and "
-                                 f"seed ({run.task}, seed {run.seed}); averaging both would count "
-                                 "that seed twice. Report one of them (pass the directories to "
-                                 "use).")
-        groups.append(RunGroup(label, each, tuple(members)))
+            other = seen.setdefault((run.task, run.seed), run)
+            if other.path != run.path and other.successes != run.successes:
+                raise ValueError(f"{other.path} and {run.path} are the same configuration, task "
+                                 f"and seed ({run.task}, seed {run.seed}) with different "
+                                 "episodes; averaging both would count that seed twice. Report "
+                                 "one of them (pass the directories to use).")
+        # A run found twice with the same episodes is one run copied into two studies.
+        groups.append(RunGroup(label, each, tuple(seen.values())))
     return sorted(groups, key=_thesis_order)
 
 

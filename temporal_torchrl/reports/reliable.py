@@ -44,7 +44,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from rliable import library, metrics
@@ -268,6 +268,8 @@ class ReliableTable:
         improvements: ``label -> Improvement`` over the baseline for the other scored
             configurations; empty when the baseline has no score (``no_baseline`` says why).
         reps, seed: the bootstraps'.
+        pairs: ``(x, y) -> Improvement`` P(X > Y) for the pairs asked for
+            (``report.py --compare X Y``).
     """
 
     metric: Metric
@@ -281,6 +283,7 @@ class ReliableTable:
     no_baseline: str | None
     reps: int
     seed: int
+    pairs: dict[tuple[str, str], Improvement] = field(default_factory=dict)
 
     @property
     def scored(self) -> list[str]:
@@ -290,13 +293,20 @@ class ReliableTable:
 
 def build_reliable_table(groups: Sequence[RunGroup], metric: str, *,
                          baseline: str = DEFAULT_BASELINE, reps: int = 2000, seed: int = 0,
-                         horizon: int = DEFAULT_HORIZON) -> ReliableTable:
+                         horizon: int = DEFAULT_HORIZON,
+                         pairs: Sequence[tuple[str, str]] = ()) -> ReliableTable:
     """``metric``'s IQM, mean, profiles and probabilities of improvement over ``baseline`` (a
-    configuration's label) for ``groups``; each estimate seeded with ``seed`` on its own."""
+    configuration's label) and for each ``(x, y)`` of ``pairs`` for ``groups``; each estimate
+    seeded with ``seed`` on its own."""
     if metric not in METRICS:
         raise ValueError(f"unknown metric {metric!r}; expected one of {', '.join(METRICS)}.")
     scores = {group.label: configuration_scores(group, metric, horizon=horizon)
               for group in groups}
+    for pair in pairs:
+        for label in pair:
+            if label not in scores:
+                raise ValueError(f"{label!r} is no configuration of the report; the "
+                                 f"configurations are: {'; '.join(map(repr, scores))}.")
     iqm, mean, profiles = {}, {}, {}
     for label, each in scores.items():
         if each.per_task:
@@ -313,5 +323,7 @@ def build_reliable_table(groups: Sequence[RunGroup], metric: str, *,
             if label != baseline:
                 improvements[label] = probability_of_improvement(
                     scores[label], scores[baseline], reps=reps, seed=seed)
+    compared = {(x, y): probability_of_improvement(scores[x], scores[y], reps=reps, seed=seed)
+                for x, y in pairs}
     return ReliableTable(METRICS[metric], horizon, scores, iqm, mean, profiles, baseline,
-                         improvements, no_baseline, reps, seed)
+                         improvements, no_baseline, reps, seed, compared)

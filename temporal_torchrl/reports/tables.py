@@ -3,10 +3,12 @@
 :class:`~temporal_torchrl.reports.aggregate.MetricTable` (:func:`table_markdown`,
 :func:`table_rows`) follows the thesis's tables: tasks as rows, configurations as columns,
 ``mean ± std (n=seeds)``, an Average row, the best value of each row in bold (lowest TTFS /
-TT50S, highest RAS; only cells whose runs all have a value compete). Runs without a value are
-written out in their cell (``1 incomplete: 120/300 ep``, ``1 censored: > 85 ep``), never as a
-number. The CSV has one row per cell with the thesis's published value and the difference
-where the configuration matches.
+TT50S, highest RAS; only cells whose runs all have a value compete). Censored TTFS / TT50S runs
+count at the horizon and are named in their cell with the median beside the mean
+(``n=4; 1 censored > 200 ep, counted 1000; median 151``); runs without a value are written out
+in their cell (``1 incomplete: 120/300 ep``), never as a number. The CSV has one row per cell
+with the thesis's published value and the difference, its interval and its reading where the
+configuration matches.
 
 :class:`~temporal_torchrl.reports.reliable.ReliableTable` (:func:`reliable_markdown`,
 :func:`reliable_rows`): one row per configuration, its IQM and mean of normalised scores over
@@ -20,7 +22,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from temporal_torchrl.reports.aggregate import (
-    CENSORED,
     INCOMPLETE,
     METRICS,
     UNDEFINED,
@@ -31,12 +32,20 @@ from temporal_torchrl.reports.aggregate import (
 )
 from temporal_torchrl.reports.groups import RunGroup, distinguishing_keys
 from temporal_torchrl.reports.published import PUBLISHED_ENCODER, PublishedCell
-from temporal_torchrl.reports.reliable import Interval, ReliableTable, Scores, score_rule
+from temporal_torchrl.reports.reliable import (
+    Improvement,
+    Interval,
+    ReliableTable,
+    Scores,
+    score_rule,
+)
+from temporal_torchrl.reports.thesis_comparison import ThesisComparison
 from temporal_torchrl.rewards.config import has_vlm_reward
 
-CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "best", "status",
-               "without_value", "published_tables", "published_mean",
-               "published_std", "difference")
+CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "median", "censored",
+               "best", "status", "without_value", "published_tables", "published_mean",
+               "published_std", "difference", "difference_ci95_low", "difference_ci95_high",
+               "reading")
 RELIABLE_COLUMNS = ("metric", "configuration", "tasks", "runs_scored", "censored_as_zero",
                     "unscored", "iqm", "iqm_ci95_low", "iqm_ci95_high", "mean", "mean_ci95_low",
                     "mean_ci95_high", "baseline", "p_improvement", "p_improvement_ci95_low",
@@ -50,24 +59,30 @@ def _number(value: float, decimals: int) -> str:
 
 
 def _pending_text(pending: Sequence[RunValue]) -> str:
-    """``2 incomplete: 120, 85/300 ep``; ``1 censored: > 85 ep``; ``2 without RAS budget``."""
+    """``2 incomplete: 120, 85/300 ep``; ``2 without RAS budget``."""
     parts = []
     incomplete = [value for value in pending if value.status == INCOMPLETE]
     if incomplete:
         episodes = ", ".join(str(value.run.episodes) for value in incomplete)
         parts.append(f"{len(incomplete)} incomplete: {episodes}/{incomplete[0].budget} ep")
-    censored = [value for value in pending if value.status == CENSORED]
-    if censored:
-        episodes = ", ".join(f"> {value.run.episodes}" for value in censored)
-        parts.append(f"{len(censored)} censored: {episodes} ep")
     undefined = [value for value in pending if value.status == UNDEFINED]
     if undefined:
         parts.append(f"{len(undefined)} without RAS budget")
     return "; ".join(parts)
 
 
+def _censored_text(cell: Cell, decimals: int) -> str:
+    """``1 censored > 200 ep, counted 1000; median 151``; ``median undetermined`` when it
+    depends on the censored runs' unknown values."""
+    episodes = ", ".join(str(value.run.episodes) for value in cell.censored)
+    median = "undetermined" if cell.median_censored else _number(cell.median, decimals)
+    return (f"{len(cell.censored)} censored > {episodes} ep, counted {cell.horizon}; "
+            f"median {median}")
+
+
 def cell_text(cell: Cell | None, decimals: int, *, bold: bool = False) -> str:
-    """A Markdown cell: ``**41.7 ± 3.2** (n=4)``, with the runs that have no value after it."""
+    """A Markdown cell: ``**41.7 ± 3.2** (n=4)``, with its censored runs and the runs that have
+    no value after it."""
     if cell is None:
         return EMPTY_CELL
     parts = []
@@ -75,7 +90,10 @@ def cell_text(cell: Cell | None, decimals: int, *, bold: bool = False) -> str:
         value = _number(cell.mean, decimals)
         if cell.std is not None:
             value += f" ± {_number(cell.std, decimals)}"
-        parts.append(f"{f'**{value}**' if bold else value} (n={len(cell.values)})")
+        count = f"n={len(cell.values)}"
+        if cell.censored:
+            count += f"; {_censored_text(cell, decimals)}"
+        parts.append(f"{f'**{value}**' if bold else value} ({count})")
     if cell.pending:
         parts.append(_pending_text(cell.pending))
     return "; ".join(parts)
@@ -90,12 +108,12 @@ def cell_status(cell: Cell) -> str:
     return "+".join(sorted({value.status for value in cell.pending}))
 
 
-def _published_text(cell: PublishedCell, decimals: int) -> str:
+def published_text(cell: PublishedCell, decimals: int) -> str:
     text = _number(cell.mean, decimals)
     return text if cell.std is None else f"{text} ± {_number(cell.std, decimals)}"
 
 
-def _markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     return "\n".join(lines)
@@ -120,7 +138,7 @@ def table_markdown(table: MetricTable) -> str:
             average.append(EMPTY_CELL)
     rows.append(["Average", *average])
     parts = [f"### {table.metric.title}", "",
-             _markdown_table(["Task", *labels], rows), "",
+             markdown_table(["Task", *labels], rows), "",
              "Mean ± sample std over seeds (n = seeds with a value); best complete value of each "
              "row in bold. Average: mean of the task means, only for configurations with every "
              "task's runs complete."]
@@ -146,9 +164,12 @@ def _difference(ours: float, published: float, decimals: int) -> str:
 
 
 def published_markdown(table: MetricTable) -> str:
-    """Configurations the thesis reports, side by side with its values (empty if none)."""
+    """Configurations the thesis reports, side by side with its values and the difference with
+    its interval and reading (:mod:`~temporal_torchrl.reports.thesis_comparison`); empty if the
+    thesis reports none of them."""
     decimals = table.metric.decimals
-    rows = []
+    comparisons = table.thesis_comparisons()
+    rows, assumed = [], False
     for group in table.groups:
         result = table.published.get(group.label)
         if result is None:
@@ -159,10 +180,16 @@ def published_markdown(table: MetricTable) -> str:
             if cell is None or task not in result.cells:
                 continue
             published = result.cells[task]
-            difference = (_difference(cell.mean, published.mean, decimals) if cell.complete
-                          else EMPTY_CELL)
+            comparison = comparisons.get((task, group.label))
+            if comparison is not None:
+                difference = comparison.describe(decimals)
+                assumed |= comparison.std_assumed
+            elif cell.complete:
+                difference = _difference(cell.mean, published.mean, decimals)
+            else:
+                difference = EMPTY_CELL
             rows.append([group.label, task, cell_text(cell, decimals),
-                         _published_text(published, decimals), difference, tables, notes])
+                         published_text(published, decimals), difference, tables, notes])
         if set(table.tasks) == set(result.cells) and group.label in table.averages:
             ours = table.averages[group.label]
             rows.append([group.label, "Average", _number(ours, decimals),
@@ -170,24 +197,36 @@ def published_markdown(table: MetricTable) -> str:
                          _difference(ours, result.average, decimals), tables, notes])
     if not rows:
         return ""
-    header = ["Configuration", "Task", "This report", "Thesis", "Δ (report − thesis)",
-              "Thesis tables", "Note"]
+    header = ["Configuration", "Task", "This report", "Thesis",
+              "Δ (report − thesis) [95% CI]: reading", "Thesis tables", "Note"]
     if not any(row[-1] for row in rows):
         header, rows = header[:-1], [row[:-1] for row in rows]
-    return "\n".join([
-        f"#### {table.metric.title}: compared with the thesis", "",
-        _markdown_table(header, rows), "",
-        "The thesis's values are LIV's, 4 seeds; matched on the reward variants, rho, lambda, "
-        "baseline, alpha and protocol. Δ only where every run of the cell has a value."])
+    text = ("The thesis's values are LIV's, 4 seeds; matched on the reward variants, rho, lambda, "
+            "baseline, alpha and protocol. Δ only where every run of the cell has a value; its "
+            "interval is Welch's, the thesis's mean counted as 4 seeds")
+    text += (" with a spread like ours where the thesis prints no std" if assumed else "")
+    text += (f". *agrees*: the 95% interval includes 0 (± its half-width); *not resolved*: it "
+             f"does not, but the interval over all {len(comparisons)} cells compared "
+             f"(Bonferroni, shown after it) does; *does not agree*: that one excludes 0 too."
+             if comparisons else ".")
+    return "\n".join([f"#### {table.metric.title}: compared with the thesis", "",
+                      markdown_table(header, rows), "", text])
 
 
 def _optional(value: float | None) -> str:
     return "" if value is None else f"{value:.10g}"
 
 
+def _comparison_fields(comparison: ThesisComparison | None) -> dict[str, str]:
+    if comparison is None:
+        return {"difference_ci95_low": "", "difference_ci95_high": "", "reading": ""}
+    return {"difference_ci95_low": _optional(comparison.low),
+            "difference_ci95_high": _optional(comparison.high), "reading": comparison.verdict}
+
+
 def table_rows(table: MetricTable) -> list[dict[str, str]]:
     """The CSV rows of ``table`` (:data:`CSV_COLUMNS`), cells then the Average rows."""
-    rows = []
+    rows, comparisons = [], table.thesis_comparisons()
     for task in table.tasks:
         best = table.best(task)
         for group in table.groups:
@@ -199,7 +238,8 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
             rows.append({
                 "task": task, "configuration": group.label, "runs": str(len(cell.runs)),
                 "n": str(len(cell.values)), "mean": _optional(cell.mean),
-                "std": _optional(cell.std),
+                "std": _optional(cell.std), "median": _optional(cell.median),
+                "censored": str(len(cell.censored)),
                 "best": str(group.label in best).lower(), "status": cell_status(cell),
                 "without_value": "; ".join(f"seed {value.run.seed}: {value.describe()}"
                                            for value in cell.pending),
@@ -207,7 +247,8 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
                 "published_mean": _optional(published.mean if published else None),
                 "published_std": _optional(published.std if published else None),
                 "difference": (_optional(cell.mean - published.mean)
-                               if published and cell.complete else "")})
+                               if published and cell.complete else ""),
+                **_comparison_fields(comparisons.get((task, group.label)))})
     best = table.best(None)
     for group in table.groups:
         average = table.averages.get(group.label)
@@ -217,12 +258,13 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
         comparable = result is not None and set(table.tasks) == set(result.cells)
         rows.append({
             "task": "Average", "configuration": group.label, "runs": str(len(group.runs)),
-            "n": "", "mean": _optional(average), "std": "",
+            "n": "", "mean": _optional(average), "std": "", "median": "", "censored": "",
             "best": str(group.label in best).lower(), "status": "complete", "without_value": "",
             "published_tables": " ".join(result.tables) if comparable else "",
             "published_mean": _optional(result.average if comparable else None),
             "published_std": "",
-            "difference": _optional(average - result.average) if comparable else ""})
+            "difference": _optional(average - result.average) if comparable else "",
+            **_comparison_fields(None)})
     return rows
 
 
@@ -276,7 +318,7 @@ def grouping_markdown(groups: Sequence[RunGroup]) -> str:
     explanation += (f"Keys that tell them apart: {', '.join(keys)}." if keys else
                     "No key tells them apart.")
     return "\n".join(["## Configurations", "", explanation, "",
-                      _markdown_table(["Configuration", "Runs", "Tasks", *keys], rows)]) + "\n"
+                      markdown_table(["Configuration", "Runs", "Tasks", *keys], rows)]) + "\n"
 
 
 # --------------------------------------------------------------------------- rliable aggregates
@@ -329,7 +371,7 @@ def reliable_markdown(table: ReliableTable) -> str:
         rows.append(row)
     rule = score_rule(table.metric.name, table.horizon)
     parts = [f"### {title}: over tasks and seeds (rliable)", "",
-             _markdown_table(header, rows), "",
+             markdown_table(header, rows), "",
              f"Normalised scores in [0, 1], higher is better: {rule}. IQM: the mean of the "
              "middle 50% of all the configuration's run scores, tasks pooled; Mean: the mean of "
              "its task means."]
@@ -347,7 +389,44 @@ def reliable_markdown(table: ReliableTable) -> str:
     if unmatched:
         parts += [""] + [f"- {improvement.label}: {improvement.reason}." for improvement in
                          unmatched]
+    if table.pairs:
+        parts += ["", _pairs_markdown(table)]
+    shown = {(each.label, each.baseline): each
+             for each in [*table.improvements.values(), *table.pairs.values()]}
+    degenerate = [note for improvement in shown.values()
+                  if (note := degenerate_note(improvement, table.scores)) is not None]
+    if degenerate:
+        parts += [""] + [f"- {note}" for note in degenerate]
     return "\n".join(parts) + "\n"
+
+
+def _pairs_markdown(table: ReliableTable) -> str:
+    rows = []
+    for (x, y), improvement in table.pairs.items():
+        tasks = ", ".join(improvement.tasks) if improvement.tasks else EMPTY_CELL
+        text = (_interval_text(improvement.interval) if improvement.interval is not None
+                else f"{EMPTY_CELL} ({improvement.reason})")
+        rows.append([f"P({x} > {y})", tasks, text])
+    return "\n".join([f"#### {table.metric.title}: probabilities of improvement asked for", "",
+                      markdown_table(["Comparison", "Tasks in common", "P [95% CI]"], rows)])
+
+
+def degenerate_note(improvement: Improvement, scores: dict[str, Scores]) -> str | None:
+    """What a collapsed interval (P = 1.00 [1.00, 1.00], or 0.00 [0.00, 0.00]) means, or None
+    when the interval is not one."""
+    interval = improvement.interval
+    if interval is None or interval.low != interval.high or interval.estimate not in (0.0, 1.0):
+        return None
+    winner, loser = ((improvement.label, improvement.baseline) if interval.estimate == 1.0
+                     else (improvement.baseline, improvement.label))
+    runs = " and ".join(
+        f"{sum(scores[label].task_scores(task).shape[0] for task in improvement.tasks)} "
+        f"of {label}" for label in (winner, loser))
+    return (f"P({improvement.label} > {improvement.baseline}) = {interval.estimate:.2f} "
+            f"[{interval.low:.2f}, {interval.high:.2f}]: every run of {winner} scored above "
+            f"every run of {loser} on each of the {len(improvement.tasks)} task(s) in common "
+            f"({runs} runs). A bootstrap resamples only the runs seen, so the interval "
+            f"collapses onto them: this is what these runs show, not certainty.")
 
 
 def _interval_fields(prefix: str, interval: Interval | None) -> dict[str, str]:
