@@ -130,7 +130,9 @@ def test_a_sweep_job_resumes_restarts_or_leaves_alone_what_it_finds(tmp_path, ca
 
 @pytest.mark.parametrize(("study", "presets", "tasks"), [
     ("sac_column", "sac", {"window-close": 200, "window-open": 200, "drawer-open": 300}),
-    ("window_close_cpu_study", "sac,furl_rho1,none", {"window-close": 200})])
+    ("window_close_cpu_study", "sac,furl_rho1,none", {"window-close": 200}),
+    ("table_5_12_cpu", "sac,furl_rho1,none",
+     {"window-close": 200, "window-open": 200, "drawer-open": 300})])
 def test_budget_studies_run_each_task_to_its_ras_budget(study, presets, tasks):
     params = hydra_config(f"+study={study}").hydra.sweeper.params
     assert params["preset"] == presets and params["env.seed"] == "0,1,2,3"
@@ -145,6 +147,20 @@ def test_budget_studies_run_each_task_to_its_ras_budget(study, presets, tasks):
     assert (vlm.encoder.name, vlm.env.image_size) == ("metaworld_small", 64)
     assert (vlm.reward.positional, vlm.reward.directional, vlm.reward.rho,
             vlm.reward.lambda_, vlm.reward.baseline) == ("furl", "d3", 1.0, 4.0, "generic")
+
+
+@pytest.mark.parametrize("preset", ["sac", "furl_rho1", "none"])
+@pytest.mark.parametrize("task", ["window-open", "drawer-open"])
+def test_table_5_12_cpu_runs_window_close_studys_configs_on_its_tasks(preset, task):
+    # Its window-open and drawer-open cells were launched as window_close_cpu_study with
+    # env.task overridden: the same configs, so the same run directories.
+    overrides = (f"preset={preset}", "protocol=stage2", f"env.task={task}", "env.seed=1")
+
+    def run_config(study):  # what the run's config.json holds: the config without hydra's
+        cfg = OmegaConf.to_container(hydra_config(f"+study={study}", *overrides))
+        return {key: value for key, value in cfg.items() if key != "hydra"}
+
+    assert run_config("table_5_12_cpu") == run_config("window_close_cpu_study")
 
 
 def test_a_task_without_a_ras_budget_is_named():

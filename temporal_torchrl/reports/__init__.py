@@ -9,6 +9,10 @@
   and performance profiles, with stratified-bootstrap CIs.
 - :mod:`~temporal_torchrl.reports.published`: the thesis's Tables 5.2-5.12 as data, matched
   to run configurations.
+- :mod:`~temporal_torchrl.reports.thesis_comparison`: a cell or an average against the thesis's,
+  its seed error counted: the difference's interval and what it lets us say.
+- :mod:`~temporal_torchrl.reports.thesis_table`: the runs laid out as one of the thesis's tables,
+  ours beside it in every cell (``report.py --thesis-table``).
 - :mod:`~temporal_torchrl.reports.tables`: Markdown and CSV output.
 - :mod:`~temporal_torchrl.reports.logs`: logged training metrics (the run's metrics.jsonl).
 - :mod:`~temporal_torchrl.reports.reward_curves`: r_P and r_D along stored episodes with a
@@ -50,6 +54,12 @@ from temporal_torchrl.reports.reliable import (
     run_score,
 )
 from temporal_torchrl.reports.reward_curves import EpisodeRewards, reward_curves
+from temporal_torchrl.reports.thesis_comparison import (
+    ThesisComparison,
+    compare_averages,
+    compare_with_thesis,
+)
+from temporal_torchrl.reports.thesis_table import ThesisTablePage, build_thesis_table
 
 __all__ = [
     "DEFAULT_BASELINE",
@@ -68,9 +78,14 @@ __all__ = [
     "RunValue",
     "Scores",
     "Series",
+    "ThesisComparison",
+    "ThesisTablePage",
     "aggregate_intervals",
     "build_reliable_table",
     "build_table",
+    "build_thesis_table",
+    "compare_averages",
+    "compare_with_thesis",
     "configuration_scores",
     "find_published",
     "group_runs",

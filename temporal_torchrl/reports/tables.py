@@ -206,8 +206,9 @@ def published_markdown(table: MetricTable) -> str:
             "interval is Welch's, the thesis's mean counted as 4 seeds")
     text += (" with a spread like ours where the thesis prints no std" if assumed else "")
     text += (f". *agrees*: the 95% interval includes 0 (± its half-width); *not resolved*: it "
-             f"does not, but the interval over all {len(comparisons)} cells compared "
-             f"(Bonferroni, shown after it) does; *does not agree*: that one excludes 0 too."
+             f"excludes 0, but the interval over all {len(comparisons)} cells compared "
+             f"(Bonferroni, shown after it) includes 0; *does not agree*: that one excludes 0 "
+             f"too."
              if comparisons else ".")
     return "\n".join([f"#### {table.metric.title}: compared with the thesis", "",
                       markdown_table(header, rows), "", text])
@@ -270,14 +271,18 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
 
 def relative_run_path(path: Path, roots: Sequence[Path]) -> str:
     """``path`` relative to the first of ``roots`` that holds it (POSIX separators), prefixed
-    with that root's name when there are several; ``path``'s last three parts (task,
+    with that root when there are several (as given relative to the working directory when
+    inside it, else its name alone: no machine's paths); ``path``'s last three parts (task,
     configuration, seed) when none holds it."""
-    resolved = Path(path).resolve()
+    resolved, here = Path(path).resolve(), Path.cwd().resolve()
     for root in roots:
         root = Path(root).resolve()
         if resolved == root or root in resolved.parents:
             relative = resolved.relative_to(root).as_posix()
-            return f"{root.name}/{relative}" if len(roots) > 1 else relative
+            if len(roots) == 1:
+                return relative
+            prefix = root.relative_to(here).as_posix() if here in root.parents else root.name
+            return f"{prefix}/{relative}"
     return Path(*resolved.parts[-3:]).as_posix()
 
 

@@ -211,8 +211,8 @@ def thesis_table_markdown(page: ThesisTablePage) -> str:
                   f". *agrees*: the 95% interval includes 0 (± its half-width: a wide interval "
                   f"is consistent with the thesis, not a precise agreement); *not resolved*: it "
                   f"excludes 0, but the interval over all {len(page.comparisons)} cells "
-                  f"compared (Bonferroni, shown after it) does not; *does not agree*: that one "
-                  f"excludes 0 too. An average over several tasks is compared likewise, "
+                  f"compared (Bonferroni, shown after it) includes 0; *does not agree*: that "
+                  f"one excludes 0 too. An average over several tasks is compared likewise, "
                   f"its table-wide interval over the averages compared."]
     return "\n".join(parts) + "\n"
 
