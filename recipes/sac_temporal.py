@@ -81,9 +81,9 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None,
     when a live process holds it.
     """
     cfg = validate_recipe_config(cfg)
-    run = RunDirectory(run_directory(cfg))
-    with run.lock():  # one writer per run directory, for the whole run
-        return _train(cfg, run, given_keys, on_episode_end or (lambda episode, env_steps: None))
+    run_dir = RunDirectory(run_directory(cfg))
+    with run_dir.lock():  # one writer per run directory, for the whole run
+        return _train(cfg, run_dir, given_keys, on_episode_end or (lambda episode, env_steps: None))
 
 
 @dataclass
@@ -101,7 +101,7 @@ class Training:
     logger: RunLogger
 
 
-def build(start: RunStart, run: RunDirectory) -> Training:
+def build(start: RunStart, run_dir: RunDirectory) -> Training:
     """The encoder, reward, env, SAC agent, replay, head trainer, relay and collector of the run
     ``start`` begins, its replay filled and, on a resume, its checkpoint restored. The order is
     that of the build's random draws, which a resume must repeat."""
@@ -112,7 +112,7 @@ def build(start: RunStart, run: RunDirectory) -> Training:
     encoder = factories.make_encoder(cfg) if uses_vlm_reward(cfg) else None
     reward = factories.make_reward(cfg, encoder) if encoder is not None else None
     env = factories.make_environment(cfg, encoder, reward)
-    print(f"run directory: {run.path}")
+    print(f"run directory: {run_dir.path}")
     if saved is not None:  # a killed run's log shows where it went on from
         print(f"resumed: after episode {saved.episode:,} of {cfg.train.episodes:,} "
               f"({saved.env_steps:,} env steps, {saved.updates:,} SAC updates)")
@@ -150,17 +150,17 @@ def build(start: RunStart, run: RunDirectory) -> Training:
     random_until = progress.env_steps + collector.init_random_frames
     start.restore_rng()  # after every random draw the build makes
     return Training(encoder, buffer, trainer, relay, update_sac, state, collector, random_until,
-                    factories.make_logger(cfg, run.path))
+                    factories.make_logger(cfg, run_dir.path))
 
 
-def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | None,
+def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] | None,
            on_episode_end: EpisodeEndHook) -> dict | None:
     """:func:`train`, once the run's lock is held."""
-    start = start_run(run, cfg, given_keys)  # afresh, from the checkpoint, or already complete
+    start = start_run(run_dir, cfg, given_keys)  # afresh, from the checkpoint, or already complete
     if start.complete:
-        print(f"{run.path}: already complete ({start.checkpoint.episode} episodes)")
+        print(f"{run_dir.path}: already complete ({start.checkpoint.episode} episodes)")
         return start.summary
-    cfg, training = start.cfg, build(start, run)
+    cfg, training = start.cfg, build(start, run_dir)
     buffer, trainer, relay, logger = (training.buffer, training.trainer, training.relay,
                                       training.logger)
     state, progress = training.state, training.state.progress
@@ -196,14 +196,14 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
         trajectory, ran_in = episodes.pop(index)
         rows = episode_rows(trajectory, embedding_dtype=embedding_dtype)
         buffer.extend(rows)
-        run.save_replay_episode(progress.inserted, rows)
+        run_dir.save_replay_episode(progress.inserted, rows)
         progress.inserted += 1
         progress.episode += 1
         row = episode_row(trajectory, progress.episode, progress.env_steps, ran_in)
         progress.successes.append(bool(row["success"]))
         if row["success"] and cfg.train.save_positives:
-            run.save_positive_episode(progress.episode, rows)
-        run.append_episode(row)
+            run_dir.save_positive_episode(progress.episode, rows)
+        run_dir.append_episode(row)
         logged = {f"train/{key}": float(row[key])
                   for key in ("success", "return", "mean_vlm_reward", "stage")}
         logged |= relay.episode_metrics(index, len(trajectory))
@@ -233,7 +233,7 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
                         steps_per_s=f"{steps_per_second:.0f}")
         done = progress.episode >= cfg.train.episodes
         if progress.episode // cfg.train.checkpoint_every > checkpointed_before or done:
-            run.save_checkpoint(state.checkpoint())
+            run_dir.save_checkpoint(state.checkpoint())
         if done or progress.episode >= (cfg.train.stop_after_episodes or math.inf):
             break
     bar.close()
@@ -247,7 +247,7 @@ def _train(cfg: DictConfig, run: RunDirectory, given_keys: Collection[str] | Non
         cfg, progress, encoder=cfg.encoder.name if training.encoder is not None else None,
         steps_per_second=(progress.env_steps - start_steps) / (time.perf_counter() - start_time),
         relay_steps=relay.total_steps)
-    run.write_summary(summary)
+    run_dir.write_summary(summary)
     log_metrics(logger, {f"summary/{key}": float(summary[key]) for key in ("ttfs", "tt50s")},
                 progress.env_steps)
     return summary

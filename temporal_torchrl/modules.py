@@ -2,12 +2,10 @@
 
 Eager, :func:`relu` is :func:`torch.relu`. Under :func:`torch.compile` its backward is
 ``grad * sign(output)``, computed from the output the next layer saves anyway, so the compiled
-graph neither stores nor loads a ``bool`` tensor. Inductor's CPU code handles ``bool`` tensors
-element by element (ATen's ``Vectorized<bool>`` is its generic, array-backed class, with no SIMD
-specialisation): on the 2-core AMD EPYC of ``docs/guides/throughput.md`` saving the mask of one
-``[2, 256, 256]`` activation took 550-770 us where eager's whole ReLU takes 7 us, and it made the
-compiled SAC update 0.8x eager. With this ReLU in the actor, the critics and the reward heads,
-the compiled SAC update is 1.3x eager (rounds 1.1-1.5x).
+graph neither stores nor loads a ``bool`` tensor: inductor's CPU code handles ``bool`` tensors
+element by element (ATen's ``Vectorized<bool>`` has no SIMD specialisation), which made saving
+ReLU's mask cost more than the whole eager ReLU and the compiled SAC update slower than eager.
+The measurements, before and after, are in ``CHANGELOG.md`` (2026-12-02, evening).
 
 The gradient is ReLU's: ``grad`` where the output is positive, zero elsewhere (a zero there may
 carry ``grad``'s sign, and a non-finite ``grad`` stays non-finite, as ``grad * 0`` does).

@@ -169,6 +169,15 @@ def make_checkpoint(**fields):
     return Checkpoint(**(defaults | fields))
 
 
+def error_chain(error: BaseException | None) -> str:
+    """An error's message and its causes'."""
+    messages = []
+    while error is not None:
+        messages.append(str(error))
+        error = error.__cause__
+    return "\n".join(messages)
+
+
 # --------------------------------------------------------------------------- run directories
 # seed 0: 150 failures then 150 successes -> RAS(300; 150) = 100 %, TTFS 151, TT50S 200.
 SEED0 = [False] * 150 + [True] * 150

@@ -6,10 +6,10 @@ import json
 import re
 
 import pytest
+from helpers import RECIPES, error_chain
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
-from test_recipe import RECIPES, error_chain
 
 from temporal_torchrl.configs import RecipeConfig, RewardQualityConfig
 from temporal_torchrl.configs.rules import validate_recipe_config, validate_reward_quality_config

@@ -203,7 +203,7 @@ def test_stage_switch_follows_the_first_positive_episode():
     batch = buffer.finetuning.sample(16)
     assert int(positional(batch)["stage"]) == 1 and int(directional(batch)["stage"]) == 1
     buffer.extend(episode_rows(make_episode(1, 20, successes=(15,))))
-    positional.stage = directional.stage = 2 if buffer.has_positives else 1
+    positional.stage = directional.stage = buffer.stage
     batch = buffer.finetuning.sample(16)
     out = positional(batch)
     assert int(out["stage"]) == 2 and {"loss_pos_neg", "loss_pos_pos"} <= set(out.keys())

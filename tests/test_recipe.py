@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import sac_temporal
 import torch
-from helpers import RECIPES, config
+from helpers import RECIPES, config, error_chain
 from helpers import episode_csv_rows as episode_rows
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
@@ -391,15 +391,6 @@ def test_bad_config_stops_before_any_work(tmp_path, override, key):
         sac_temporal.train(config(tmp_path, *override.split()))
     assert key in error_chain(error.value)
     assert not (tmp_path / "run").exists()
-
-
-def error_chain(error: BaseException | None) -> str:
-    """An error's message and its causes'."""
-    messages = []
-    while error is not None:
-        messages.append(str(error))
-        error = error.__cause__
-    return "\n".join(messages)
 
 
 def test_existing_run_needs_overwrite(tmp_path):

@@ -132,10 +132,10 @@ def test_labels_follow_furl_rule_and_groups_follow_the_stage():
 
     buffer = EpisodeReplayBuffer(capacity=200, history=2, gap=10)
     insert(buffer, 0, 10)
-    assert not buffer.has_positives
+    assert buffer.stage == 1
     assert set(buffer.finetuning.sample(8).keys()) == {"negative"}
     insert(buffer, 1, 30, successes=(14, 15, 16, 20))
-    assert buffer.has_positives
+    assert buffer.stage == 2
     batch = buffer.finetuning.sample(400)
     assert set(batch.keys()) == {"negative", "positive", "positive_pair"}
     positives = batch["positive"]
@@ -198,7 +198,7 @@ def test_permanent_episodes_survive_wrap_around():
     insert(buffer, 0, 9, successes=(8,))  # rows 0..9
     for episode in range(1, 8):  # 10 rows each: the ring (rows 10..39) wraps twice
         insert(buffer, episode, 9)
-    assert buffer.num_permanent_episodes == 1 and buffer.has_positives
+    assert buffer.num_permanent_episodes == 1 and buffer.stage == 2
     stored = set(buffer.sample(2000)["episode"].tolist())
     assert stored == {0, 5, 6, 7}
     check_histories(buffer, buffer.sample(300))

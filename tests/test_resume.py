@@ -383,7 +383,7 @@ def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
         buffer.extend(rows)
     stored = set().union(*(buffer.sample()["episode"].tolist() for _ in range(60)))
     assert stored == {0, 5, 6}  # the expert and the last two training episodes
-    assert buffer.has_positives
+    assert buffer.stage == 2
 
 
 def test_run_stopped_before_its_first_checkpoint_is_replaced_not_resumed(tmp_path):

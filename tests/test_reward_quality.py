@@ -197,7 +197,7 @@ def test_finetuning_trains_heads_towards_the_labels(held_out_episodes):
     after = score_reward(reward, successful, failed)
     assert after.auroc > max(before, 0.9)
     stage_one = make_finetuning_buffer([*successful, *failed], stage=1, history=3)
-    assert not stage_one.has_positives and stage_one.num_episodes == 2
+    assert stage_one.stage == 1 and stage_one.num_episodes == 2
 
 
 # --------------------------------------------------------------------------- dataset

@@ -53,8 +53,8 @@ Example:
     >>> batch = buffer.sample(4)
     >>> batch["next", "previous_embedding"].shape
     torch.Size([4, 8])
-    >>> buffer.num_transitions, buffer.has_positives
-    (6, False)
+    >>> buffer.num_transitions, buffer.stage  # no positive episode yet: stage 1
+    (6, 1)
     >>> sorted(buffer.finetuning.sample(4).keys())
     ['negative']
 """
@@ -160,11 +160,6 @@ class EpisodeReplayBuffer(ReplayBuffer):
     def stage(self) -> int:
         """The finetuning's stage (:attr:`FinetuningSampler.stage`)."""
         return self.finetuning.sampler.stage
-
-    @property
-    def has_positives(self) -> bool:
-        """Whether a stored episode has positive states (the finetuning's stage 2)."""
-        return self.stage == 2
 
     def memory_bytes(self) -> int:
         """Bytes held by the stored rows and the writer's bookkeeping."""

@@ -158,6 +158,8 @@ class EpisodeWriter(Writer):
         self.version += 1
         self._derived = None
 
+    # TorchRL's Writer interface: ReplayBuffer.dumps / loads save and restore the writer with
+    # the storage and the sampler (tests/test_replay.py round-trips a buffer through them).
     def dumps(self, path: str | Path) -> None:
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)

@@ -160,9 +160,9 @@ class StackedCriticSACLoss(LossModule):
             bootstrap = ~tensordict["next", "terminated"].squeeze(-1)
             target = reward + self.gamma * bootstrap * next_value
         if torch.compiler.is_compiling():
-            # Two graphs, so that the compiled update draws its noise in the eager order: torch
-            # 2.11's inductor scheduled the two independent draws (next state's, then this
-            # state's) the other way round, even with fallback_random (torch 2.14 keeps them).
+            # Two graphs, so that the compiled update draws its noise in the eager order: inductor
+            # may schedule the two independent draws (next state's, then this state's) the other
+            # way round, even with fallback_random. torch.compiler has no public graph break.
             torch._dynamo.graph_break()
         loss_qvalue = (self.critics(observation, action) - target).pow(2).sum(0).mean()
         new_action, log_prob = self._sample(observation)
@@ -177,5 +177,7 @@ class StackedCriticSACLoss(LossModule):
     @torch.no_grad()
     def update_target_critics(self) -> None:
         """One Polyak step of the target critics towards the critics."""
+        # One fused kernel over every parameter; torch has no public foreach lerp (torch.optim's
+        # Adam calls this one).
         torch._foreach_lerp_(list(self.target_critics.parameters()),
                              list(self.critics.parameters()), self.tau)

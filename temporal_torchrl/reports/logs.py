@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from temporal_torchrl.runs import METRICS_FILE, RunDirectory
-
-CSV_LOG_DIR = "logs"
+from temporal_torchrl.runs.layout import LOGS_DIR
 
 
 @dataclass(frozen=True)
@@ -51,7 +50,7 @@ def jsonl_scalars(run_dir: Path) -> dict[str, Series]:
 def csv_scalars(run_dir: Path) -> dict[str, Series]:
     """Every scalar of the run's CSV logs (``logs/*/scalars/**.csv``)."""
     points: dict[str, dict[float, float]] = {}
-    for scalars in sorted((run_dir / CSV_LOG_DIR).glob("*/scalars")):
+    for scalars in sorted((run_dir / LOGS_DIR).glob("*/scalars")):
         for path in sorted(scalars.rglob("*.csv")):
             key = path.relative_to(scalars).with_suffix("").as_posix()
             for number, line in enumerate(path.read_text().splitlines(), start=1):

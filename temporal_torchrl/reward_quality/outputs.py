@@ -18,8 +18,6 @@ from typing import Any
 from matplotlib.figure import Figure
 from torch import Tensor
 
-#: Head states of a row, in table order.
-HEADS_STATES = ("zero-shot", "untrained", "finetuned")
 #: The metric each kind is ranked by, then AUROC; (key, column title).
 KIND_METRICS = {
     "positional": ("value_order_correlation", "VOC"),

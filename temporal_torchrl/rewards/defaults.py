@@ -45,5 +45,5 @@ L2_MARGIN = 0.2
 #: The directional loss's contrasted terms at the variant's own position (the thesis text, 4.3.3);
 #: False: the release's plain position for D4 and D5.
 SAME_POSITION = True
-#: The heads' Adam learning rate (the thesis's release, prior-implementations.md).
+#: The heads' Adam learning rate (the thesis release, LukasWill/directional_vlm_rl).
 HEADS_LEARNING_RATE = 1e-4

@@ -15,11 +15,17 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
-from temporal_torchrl.runs.layout import CONFIG_FILE, EPISODES_FILE, METRICS_FILE, SUMMARY_FILE
+from temporal_torchrl.runs.layout import (
+    CONFIG_FILE,
+    EPISODES_FILE,
+    LOGS_DIR,
+    METRICS_FILE,
+    SUMMARY_FILE,
+)
 
 #: What a committed run holds: files, then folders.
 RAW_FILES = (CONFIG_FILE, SUMMARY_FILE, EPISODES_FILE, METRICS_FILE)
-RAW_FOLDERS = ("logs",)
+RAW_FOLDERS = (LOGS_DIR,)
 
 
 def finished_runs(sweep: Path, patterns: Sequence[str] = ("**",)) -> list[Path]:

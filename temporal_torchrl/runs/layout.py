@@ -38,8 +38,6 @@ def episode_file(index: int) -> str:
 
 #: Preloaded positive episodes of each protocol of the thesis (section 5.1).
 PROTOCOLS = {0: "stage1", 50: "stage2"}
-#: Positive episodes the thesis preloads in its second stage (protocol=stage2).
-STAGE2_POSITIVES = next(count for count, name in PROTOCOLS.items() if name == "stage2")
 
 
 def protocol_name(preload_positives: int) -> str:

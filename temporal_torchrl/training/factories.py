@@ -41,6 +41,7 @@ from temporal_torchrl.modules import ReLU
 from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
 from temporal_torchrl.rewards import TemporalReward, reward_from_config
 from temporal_torchrl.runs import RunDirectory, check_positives_source
+from temporal_torchrl.runs.layout import LOGS_DIR
 from temporal_torchrl.training.logger import RunLogger
 from temporal_torchrl.training.relay import (
     NoRelay,
@@ -275,6 +276,8 @@ def compile_options(mode: str | None) -> dict:
     numbers drawn by ATen's generator (``fallback_random``): the compiled SAC update and policy
     take the draws the eager ones take, so a seeded run's episodes do not depend on
     ``compile.enabled`` beyond float rounding."""
+    # torch.compile takes a mode or options, not both, and has no public API that gives a
+    # mode's options to add ours to.
     return {**torch._inductor.list_mode_options(mode or "default"), "fallback_random": True}
 
 
@@ -324,7 +327,7 @@ def make_logger(cfg: DictConfig, run_dir: Path) -> RunLogger:
 def _backend_logger(cfg: DictConfig, run_dir: Path) -> Logger | None:
     name = cfg.logger.exp_name or run_dir.name
     if cfg.logger.backend == "csv":
-        return CSVLogger(name, log_dir=str(run_dir / "logs"))
+        return CSVLogger(name, log_dir=str(run_dir / LOGS_DIR))
     if cfg.logger.backend == "wandb":
         return WandbLogger(name, offline=cfg.logger.mode != "online", save_dir=str(run_dir),
                            project=cfg.logger.project,

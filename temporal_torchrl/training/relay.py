@@ -2,8 +2,8 @@
 
 Until the finetuning has enough positive states, each training episode alternates between the
 VLM-reward agent and a *relay* agent: a second SAC agent trained on the sparse task reward only,
-whose sampled actions get Gaussian noise. The release (``train_furl.py``; facts in
-``shared/reference/prior-implementations.md``) does this:
+whose sampled actions get Gaussian noise. The thesis release (``train_furl.py`` in
+LukasWill/directional_vlm_rl, after FuRL's fuyw/FuRL) does this:
 
 - within an episode the agent acting at step ``t`` is ``agents[(t // period) % 2]``, with
   ``period`` drawn uniformly from ``(50, 100, 150, 200)`` at the start of every episode;

@@ -117,8 +117,8 @@ class RewardHeadTrainer:
 
 def _trainable(loss: LossModule, out: TensorDict) -> Tensor:
     """``loss``'s value to minimise, checked to reach its heads: a loss that scored something
-    but returned no gradient would leave its heads untrained without a word (a compiled loss
-    once did, in stage 1)."""
+    but returned no gradient would leave its heads untrained without a word (a compiled loss can
+    lose the graph to its heads)."""
     value = out[loss.loss_key]
     if not value.requires_grad:
         raise RuntimeError(
