@@ -1,5 +1,6 @@
 """RenderTransform: upright frames, declared specs, fast vs default look, several envs, switch."""
 
+import multiprocessing
 import os
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 from torchrl.envs import TransformedEnv
+from torchrl.envs.utils import check_env_specs
 
 from temporal_torchrl.envs import make_env
 from temporal_torchrl.envs.metaworld_env import MetaworldEnv
@@ -151,13 +153,45 @@ def test_two_envs_render_correctly_in_one_process():
     assert torch.equal(replay.step(action.clone())["next", "pixels"], first_step)
 
 
-def test_switching_off_stops_rendering():
+def test_switching_off_stops_rendering_and_the_spec_follows():
     env = make_env("push", render=True, image_size=SIZE, max_episode_steps=3)
     env.transform.switch(False)
+    assert "pixels" not in env.observation_spec.keys()
+    check_env_specs(env)
     rollout = env.rollout(3)
     assert "pixels" not in rollout.keys() and ("next", "pixels") not in rollout.keys(True)
     env.transform.switch()
+    assert env.observation_spec["pixels"].shape == (SIZE, SIZE, 3)
+    check_env_specs(env)
     assert env.reset()["pixels"].shape == (SIZE, SIZE, 3)
+
+
+def _render_in_fork(queue) -> None:
+    env = TransformedEnv(MetaworldEnv("push", max_episode_steps=3),
+                         RenderTransform(image_size=SIZE))
+    try:
+        env.rollout(2)
+        queue.put("rendered")
+    except RuntimeError as error:
+        queue.put(str(error))
+
+
+def test_a_child_forked_after_rendering_refuses_at_once_instead_of_hanging():
+    # MuJoCo's EGL renderer set-up hangs forever in such a child (the parent of a fork-started
+    # ParallelEnv then spins without raising); the transform refuses, naming the fix.
+    env = TransformedEnv(MetaworldEnv("push", max_episode_steps=3),
+                         RenderTransform(image_size=SIZE))
+    env.rollout(2)
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_render_in_fork, args=(queue,))
+    child.start()
+    child.join(60)
+    if child.is_alive():
+        child.kill()
+        pytest.fail("the forked child hung in the renderer set-up instead of raising")
+    message = queue.get(timeout=5)
+    assert "forked from process" in message and 'mp_start_method="spawn"' in message
 
 
 def test_replay_path_is_the_identity_and_transform_needs_a_mujoco_env():

@@ -6,6 +6,7 @@ The frames o_t are what the VLM image encoder embeds, s_t = phi_I(o_t) (thesis c
 from __future__ import annotations
 
 import atexit
+import os
 import weakref
 
 import mujoco
@@ -13,6 +14,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 from torchrl.data import Bounded, Composite
+from torchrl.envs import EnvBase
 from torchrl.envs.transforms import Transform
 
 from temporal_torchrl._headless_gl import match_mujoco_backend
@@ -117,6 +119,7 @@ class RenderTransform(Transform):
         )
 
     def _build_renderer(self) -> None:
+        _refuse_forked_after_rendering()
         match_mujoco_backend()
         model, data = self._mujoco_model_and_data()
         self.validate_camera(model)
@@ -144,6 +147,8 @@ class RenderTransform(Transform):
         # Metaworld's envs keep `data` forwarded, so cam_xmat is current.
         self._rotate = bool(data.cam_xmat[camera_id].reshape(3, 3)[2, 1] < 0)
         self._renderer, self._mjv_camera, self._data = renderer, mjv_camera, data
+        global _RENDERING_PID
+        _RENDERING_PID = os.getpid()
         _register_exit_cleanup()
         _LIVE_TRANSFORMS.add(self)
 
@@ -166,8 +171,15 @@ class RenderTransform(Transform):
         return torch.from_numpy(self._renderer.render())
 
     def switch(self, mode: bool | None = None) -> None:
-        """Turn rendering on (``True``), off (``False``) or toggle it (``None``)."""
+        """Turn rendering on (``True``), off (``False``) or toggle it (``None``); the env's
+        specs follow (``out_key`` is declared only while rendering is on)."""
         self.enabled = (not self.enabled) if mode is None else bool(mode)
+        self.out_keys = [self.out_key] if self.enabled else []  # TorchRL checks them in the spec
+        container = self.container
+        while container is not None and not isinstance(container, EnvBase):
+            container = getattr(container, "container", None)
+        if container is not None:
+            container.empty_cache()  # the env's cached specs are recomputed from ours
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
         if self.enabled:
@@ -187,10 +199,11 @@ class RenderTransform(Transform):
         return tensordict
 
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
-        observation_spec[self.out_key] = Bounded(
-            0, 255, (*observation_spec.shape, self.height, self.width, 3), dtype=torch.uint8,
-            device=observation_spec.device,
-        )
+        if self.enabled:
+            observation_spec[self.out_key] = Bounded(
+                0, 255, (*observation_spec.shape, self.height, self.width, 3),
+                dtype=torch.uint8, device=observation_spec.device,
+            )
         return observation_spec
 
     def clone(self) -> RenderTransform:
@@ -229,6 +242,22 @@ def _register_exit_cleanup() -> None:
     if not _EXIT_CLEANUP_REGISTERED:
         atexit.register(_close_live_renderers)
         _EXIT_CLEANUP_REGISTERED = True
+
+
+# The process that created a renderer. A child forked from it inherits its EGL display state,
+# and MuJoCo's renderer set-up in the child then waits forever (the parent spinning at 100% CPU
+# in a ParallelEnv with mp_start_method="fork"). Refusing at once names the fix instead.
+_RENDERING_PID: int | None = None
+
+
+def _refuse_forked_after_rendering() -> None:
+    if _RENDERING_PID is not None and _RENDERING_PID != os.getpid():
+        raise RuntimeError(
+            f"RenderTransform: this process (pid {os.getpid()}) was forked from process "
+            f"{_RENDERING_PID} after that one had rendered, and MuJoCo's EGL renderer set-up "
+            "hangs in such a child. Start the workers with spawn, "
+            "ParallelEnv(..., mp_start_method=\"spawn\") (TorchRL's default), or create them "
+            "before the parent renders anything.")
 
 
 def _parse_image_size(image_size: int | tuple[int, int]) -> tuple[int, int]:
