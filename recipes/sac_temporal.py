@@ -36,6 +36,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 from tensordict import TensorDictBase
+from torchrl import timeit
 from torchrl.collectors import Collector
 from tqdm import tqdm
 
@@ -65,6 +66,7 @@ from temporal_torchrl.training import (
     start_run,
 )
 from temporal_torchrl.training.relay import NoRelay, RelayExploration
+from temporal_torchrl.training.timing import PhaseClock, timed
 
 #: Called after each episode the run records, with its number and the run's env steps then.
 EpisodeEndHook = Callable[[int, int], None]
@@ -168,10 +170,11 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
     embedding_dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
     episodes = EpisodeAssembler(cfg.env.num_envs, buffer.stage)
 
+    @timeit("time/logging")
     def log_training_metrics() -> None:
         progress.last_metrics = metrics.flush() | {
             "train/stage": float(buffer.stage), "train/positive_states": buffer.num_positive_states}
-        log_metrics(logger, progress.last_metrics, progress.env_steps)
+        log_metrics(logger, progress.last_metrics | clock.window(), progress.env_steps)
 
     def update(env_steps: int) -> None:
         """The reward-head and SAC updates ``env_steps`` new env steps are owed."""
@@ -179,18 +182,22 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
             env_steps, cfg.train.utd_ratio,
             cfg.train.reward_updates_per_step if trainer is not None else 0)
         for _ in range(reward_updates):
-            metrics.add("reward", trainer.update())
+            with timeit("time/head_update"):
+                metrics.add("reward", trainer.update())
         for _ in range(sac_updates):
-            batch = buffer.sample()  # rewards relabelled with the current heads
-            relay_batch = relay.batch_to_learn(batch)  # before SAC's update adds keys to batch
-            metrics.add("sac", training.update_sac(batch))
-            if relay_batch is not None:  # the relay agent learns from the same batches
-                metrics.add("relay", relay.update(relay_batch))
+            with timeit("time/replay_sample"):
+                batch = buffer.sample()  # rewards relabelled with the current heads
+            with timeit("time/sac_update"):
+                relay_batch = relay.batch_to_learn(batch)  # before SAC's update adds its keys
+                metrics.add("sac", training.update_sac(batch))
+                if relay_batch is not None:  # the relay agent learns from the same batches
+                    metrics.add("relay", relay.update(relay_batch))
             metrics.add("relabelled", reward_statistics(batch["next"]))
             progress.updates += 1
             if progress.updates % cfg.logger.log_every == 0:
                 log_training_metrics()
 
+    @timeit("time/episode_end")
     def finish_episode(index: int) -> None:
         """Env ``index``'s episode ended: labelled and inserted, saved, its row logged."""
         trajectory, ran_in = episodes.pop(index)
@@ -215,7 +222,8 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
     num_envs, start_time, start_steps = cfg.env.num_envs, time.perf_counter(), progress.env_steps
     bar = tqdm(total=cfg.train.episodes, initial=progress.episode,
                disable=not cfg.train.progress, desc="episodes")
-    for data in training.collector:
+    clock = PhaseClock()  # seconds per phase (temporal_torchrl/training/timing.py)
+    for data in timed(training.collector, "env_step"):
         progress.env_steps += num_envs
         if progress.env_steps > cfg.train.random_steps and buffer.num_transitions > 0:
             update(num_envs)
@@ -233,7 +241,8 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
                         steps_per_s=f"{steps_per_second:.0f}")
         done = progress.episode >= cfg.train.episodes
         if progress.episode // cfg.train.checkpoint_every > checkpointed_before or done:
-            run_dir.save_checkpoint(state.checkpoint())
+            with timeit("time/checkpoint"):
+                run_dir.save_checkpoint(state.checkpoint())
         if done or progress.episode >= (cfg.train.stop_after_episodes or math.inf):
             break
     bar.close()
@@ -246,7 +255,7 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
     summary = run_summary(
         cfg, progress, encoder=cfg.encoder.name if training.encoder is not None else None,
         steps_per_second=(progress.env_steps - start_steps) / (time.perf_counter() - start_time),
-        relay_steps=relay.total_steps)
+        relay_steps=relay.total_steps, phase_seconds=clock.totals())
     run_dir.write_summary(summary)
     log_metrics(logger, {f"summary/{key}": float(summary[key]) for key in ("ttfs", "tt50s")},
                 progress.env_steps)

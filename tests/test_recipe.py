@@ -3,6 +3,7 @@ directories, bad config (resume: test_resume.py)."""
 
 import json
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,7 @@ from hydra.errors import ConfigCompositionException
 import temporal_torchrl.training.episodes as episodes_module
 from temporal_torchrl.runs import RunDirectory, default_run_dir
 from temporal_torchrl.training import factories
+from temporal_torchrl.training.timing import PHASES
 
 VARIANTS = [("none", "none"), ("liv", "none"), ("furl", "none"), ("p1", "none"),
             ("p2", "none"), ("p3", "none"), ("p4", "none"), ("furl", "d1"), ("furl", "d2"),
@@ -275,6 +277,28 @@ def test_a_run_shorter_than_the_log_window_still_logs_its_metrics(tmp_path):
     assert len(logged) == 1
     step, value = logged[0].split(",")
     assert int(step) == 40 and float(value) == pytest.approx(metrics["sac/alpha"])
+
+
+def test_runs_report_where_their_time_goes(tmp_path):
+    """Seconds per phase of the loop: a window with each logged metrics row (metrics.jsonl) and
+    the run's totals in summary.json, every phase that ran, within the run's wall time."""
+    start = time.perf_counter()
+    summary = sac_temporal.train(config(tmp_path, "reward.directional=d3", "protocol=stage2",
+                                        "train.preload_positives=1", "train.episodes=2",
+                                        "logger.log_every=10"))
+    wall = time.perf_counter() - start
+    phases = summary["phase_seconds"]
+    assert set(phases) == {f"{phase}" for phase in PHASES}  # each ran in this run
+    assert all(seconds > 0 for seconds in phases.values())
+    # nested: relabel is part of replay_sample; the rest do not overlap
+    assert phases["relabel"] <= phases["replay_sample"]
+    assert sum(seconds for phase, seconds in phases.items() if phase != "relabel") < wall
+    rows = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text()
+            .splitlines()]
+    windows = [row for row in rows if "time/sac_update" in row.get("metrics", row)]
+    assert len(windows) == 3  # updates 10, 20, 30
+    logged = sum(row.get("metrics", row)["time/sac_update"] for row in windows)
+    assert logged == pytest.approx(phases["sac_update"], rel=1e-6)
 
 
 # ---- run directories and the command line

@@ -12,9 +12,11 @@ from temporal_torchrl.training.state import TrainingProgress
 
 
 def run_summary(cfg: DictConfig, progress: TrainingProgress, *, steps_per_second: float,
-                encoder: str | None, relay_steps: int) -> dict[str, Any]:
+                encoder: str | None, relay_steps: int,
+                phase_seconds: dict[str, float] | None = None) -> dict[str, Any]:
     """TTFS and TT50S (the horizon when never reached), RAS with the task's episode budget
-    (None until the run has reached it), the counters, the throughput, the last training
+    (None until the run has reached it), the counters, the throughput, the seconds per phase of
+    the loop (:mod:`~temporal_torchrl.training.timing`; this process's), the last training
     metrics and the resolved config."""
     successes = progress.successes
     budget = get_task(cfg.env.task).ras_budget
@@ -27,4 +29,5 @@ def run_summary(cfg: DictConfig, progress: TrainingProgress, *, steps_per_second
         "episodes": progress.episode, "env_steps": progress.env_steps,
         "successes": int(sum(successes)), "steps_per_second": steps_per_second,
         "encoder": encoder, "updates": progress.updates, "last_metrics": progress.last_metrics,
-        "relay_steps": relay_steps, "config": OmegaConf.to_container(cfg, resolve=True)}
+        "relay_steps": relay_steps, "phase_seconds": phase_seconds or {},
+        "config": OmegaConf.to_container(cfg, resolve=True)}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 from tensordict import TensorDictBase
+from torchrl import timeit
 from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
@@ -88,8 +89,11 @@ class TemporalRewardTransform(Transform):
         return tensordict_reset
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        next_tensordict = tensordict.get("next", None)
-        self._call(tensordict if next_tensordict is None else next_tensordict)
+        # Stored batches only (an env calls _call): the recipe's relabel phase
+        # (temporal_torchrl.training.timing).
+        with timeit("time/relabel"):
+            next_tensordict = tensordict.get("next", None)
+            self._call(tensordict if next_tensordict is None else next_tensordict)
         return tensordict
 
     def transform_reward_spec(self, reward_spec: Composite) -> Composite:
