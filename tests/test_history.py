@@ -134,3 +134,39 @@ def test_errors():
         history(TensorDict({"embedding": torch.zeros(3)}))
     with pytest.raises(KeyError, match="embedding transform before"):
         history._reset(TensorDict(), TensorDict({"pixels": torch.zeros(3)}))
+
+
+def _walk(history, steps, start=0.0):
+    """Reset at ``start`` then ``steps`` steps of embeddings start+1, start+2, ...: the last
+    step's outputs."""
+    history._reset(TensorDict(), TensorDict({"embedding": torch.full((3,), start)}))
+    return _steps(history, steps, start)
+
+
+def _steps(history, steps, start):
+    out = None
+    for t in range(1, steps + 1):
+        out = history._step(TensorDict(), TensorDict({"embedding": torch.full((3,), start + t)}))
+    return {key: out[key].clone() for key in ("initial_embedding", "previous_embedding",
+                                               "embedding_window")}
+
+
+def test_state_dict_clone_and_to_carry_the_ring_mid_episode():
+    # As CatFrames' buffer: a transform saved, cloned or moved mid-episode goes on where it was.
+    original = EmbeddingHistoryTransform(k=2, window_length=3)
+    _walk(original, 4)
+    assert set(original.state_dict()) == {"_ring", "_initial", "_cursor"}
+    restored = EmbeddingHistoryTransform(k=2, window_length=3)
+    assert set(restored.state_dict()) == {"_cursor"}  # no ring before its first reset
+    restored.load_state_dict(original.state_dict())
+    clone = original.clone()
+    expected = _steps(original, 3, 4.0)  # s_7: s_5 two back, s_0 the start, window s_5..s_7
+    assert expected["previous_embedding"].tolist() == [5.0] * 3
+    for other in (restored, clone):
+        for key, value in _steps(other, 3, 4.0).items():
+            assert torch.equal(value, expected[key]), key
+    _steps(clone, 2, 100.0)  # the clone's ring is its own
+    assert _steps(original, 1, 7.0)["previous_embedding"].tolist() == [6.0] * 3
+    moved = original.to(torch.float64)
+    assert moved._ring.dtype == moved._initial.dtype == torch.float64
+    assert moved._cursor.dtype == torch.int64

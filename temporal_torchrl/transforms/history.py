@@ -27,7 +27,9 @@ class EmbeddingHistoryTransform(Transform):
     Each batch element keeps a ring of its last max(k, K - 1) + 1 embeddings; a reset fills the
     ring of every reset element with its new s_0, so partial resets of batched envs (the
     ``"_reset"`` mask) restart only those elements. A single cursor serves the whole batch
-    because all elements step together.
+    because all elements step together. The ring, s_0 and the cursor are buffers, as
+    ``CatFrames`` keeps its own: ``state_dict()``, ``.to()`` and :meth:`clone` carry them, so a
+    transform saved, moved or cloned mid-episode goes on where it was.
 
     The transform is stateful and runs only inside an environment: a sampled batch already
     carries the two keys as they were collected, so :meth:`forward` raises.
@@ -65,17 +67,22 @@ class EmbeddingHistoryTransform(Transform):
         self.window_length = window_length
         # The ring reaches back far enough for both s_{t-k} and the window's oldest s_{t-K+1}.
         self._size = max(k, (window_length or 1) - 1) + 1
-        self._ring: Tensor | None = None  # [*batch, size, D], slot of s_t at the cursor
-        self._initial: Tensor | None = None  # [*batch, D]
-        self._cursor = 0  # ring slot of the newest embedding s_t
+        # Shaped by the first reset: None until then (and absent from state_dict()).
+        self._ring: Tensor | None  # [*batch, size, D], slot of s_t at the cursor
+        self._initial: Tensor | None  # [*batch, D]
+        self.register_buffer("_ring", None)
+        self.register_buffer("_initial", None)
+        # The ring slot of the newest embedding s_t.
+        self.register_buffer("_cursor", torch.zeros((), dtype=torch.int64))
 
     def _write(self, tensordict: TensorDictBase) -> TensorDictBase:
         # Clones: the ring is updated in place, and the outputs must not change with it.
-        previous = self._ring[..., (self._cursor - self.k) % self._size, :]
+        cursor = int(self._cursor)
+        previous = self._ring[..., (cursor - self.k) % self._size, :]
         tensordict.set(INITIAL_EMBEDDING_KEY, self._initial.clone())
         tensordict.set(PREVIOUS_EMBEDDING_KEY, previous.clone())
         if self.window_length:
-            slots = (self._cursor - torch.arange(self.window_length - 1, -1, -1)) % self._size
+            slots = (cursor - torch.arange(self.window_length - 1, -1, -1)) % self._size
             tensordict.set(WINDOW_KEY, self._ring[..., slots.to(self._ring.device), :])
         return tensordict
 
@@ -103,9 +110,26 @@ class EmbeddingHistoryTransform(Transform):
         if self._ring is None:
             raise RuntimeError("EmbeddingHistoryTransform: step before reset; call env.reset() "
                                "first.")
-        self._cursor = (self._cursor + 1) % self._size
-        self._ring[..., self._cursor, :] = next_tensordict.get(self.in_key)
+        cursor = (int(self._cursor) + 1) % self._size
+        self._cursor.fill_(cursor)
+        self._ring[..., cursor, :] = next_tensordict.get(self.in_key)
         return self._write(next_tensordict)
+
+    def clone(self) -> EmbeddingHistoryTransform:
+        # TorchRL's clone shares the buffers' tensors; the ring is written in place.
+        copy = super().clone()
+        for name, buffer in self._buffers.items():
+            setattr(copy, name, None if buffer is None else buffer.clone())
+        return copy
+
+    def _load_from_state_dict(self, state_dict: dict, prefix: str, *args, **kwargs) -> None:
+        # A transform that has not been reset holds no ring yet: give it one of the saved shape
+        # for torch to fill.
+        for name in ("_ring", "_initial"):
+            saved = state_dict.get(prefix + name)
+            if saved is not None and getattr(self, name) is None:
+                setattr(self, name, torch.empty_like(saved))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         raise RuntimeError(
