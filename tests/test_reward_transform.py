@@ -139,3 +139,25 @@ def test_real_env_and_state_encoder_pass_check_env_specs():
     rollout = env.rollout(15, break_when_any_done=False)
     relabelled = TemporalRewardTransform(reward)(rollout.clone())
     torch.testing.assert_close(relabelled["next", "reward"], rollout["next", "reward"])
+
+
+def test_the_envs_state_dict_holds_the_heads_and_restores_them():
+    # The heads are referenced, not registered (env.to() must not move them), yet an env
+    # checkpointed alone, as TorchRL users do, keeps them.
+    trained, fresh = _reward(), _reward()
+    with torch.no_grad():
+        for parameter in trained.parameters():
+            parameter.add_(torch.randn_like(parameter))
+    state = _env(trained).state_dict()
+    keys = {key for key in state if ".reward." in key}
+    assert keys == {f"transforms.1.reward.{key}" for key in trained.state_dict()}
+    env = _env(fresh)
+    env.load_state_dict(state)  # strict: no key missing or unexpected
+    for key, value in trained.state_dict().items():
+        assert torch.equal(fresh.state_dict()[key], value), key
+    rollout = env.rollout(6, break_when_any_done=False)
+    expected = _env(trained).rollout(6, break_when_any_done=False)
+    torch.testing.assert_close(rollout["next", "reward"], expected["next", "reward"])
+    incomplete = {key: value for key, value in state.items() if "directional_heads" not in key}
+    with pytest.raises(RuntimeError, match="Missing key.*directional_heads"):
+        _env(_reward()).load_state_dict(incomplete)

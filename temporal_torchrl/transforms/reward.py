@@ -14,6 +14,10 @@ from temporal_torchrl.transforms.history import WINDOW_KEY
 INPUT_KEYS = ("embedding", "initial_embedding", "previous_embedding", "success")
 
 
+#: Where the referenced reward's state sits in the transform's (and so the env's) state_dict.
+REWARD_PREFIX = "reward."
+
+
 class TemporalRewardTransform(Transform):
     """Overwrites ``"reward"`` with r = r_task + rho (r_P + lambda r_D) (thesis 4.1).
 
@@ -37,6 +41,10 @@ class TemporalRewardTransform(Transform):
     The transform refers to the :class:`TemporalReward` (``.reward``) without owning it: the
     reward stays on the device it was put on (the training device), whatever device the env
     moves its transforms to, and inputs are moved to it and rewards back to the batch's device.
+    Its state is the env's all the same: ``env.state_dict()`` holds it under the transform's
+    prefix and ``reward.`` (``transform.reward.*``, or ``transforms.<i>.reward.*`` in a
+    ``Compose``: the heads, s_g, the baselines), and ``env.load_state_dict`` restores it into the
+    referenced reward, so an env checkpointed alone keeps its heads.
     In a batched env put the transform on the outer env so the workers do not run stale copies
     of the heads.
 
@@ -63,6 +71,29 @@ class TemporalRewardTransform(Transform):
         # Referenced, not registered: an env's ``.to(device)`` must not move the heads the
         # trainer updates on the training device.
         self.__dict__["reward"] = reward
+
+    # The reward is referenced, not registered (see __init__), so its state goes through these.
+    def _save_to_state_dict(self, destination: dict, prefix: str, keep_vars: bool) -> None:
+        super()._save_to_state_dict(destination, prefix, keep_vars)
+        for key, value in self.reward.state_dict(keep_vars=keep_vars).items():
+            destination[f"{prefix}{REWARD_PREFIX}{key}"] = value
+
+    def _load_from_state_dict(self, state_dict: dict, prefix: str, local_metadata: dict,
+                              strict: bool, missing_keys: list, unexpected_keys: list,
+                              error_msgs: list) -> None:
+        own = f"{prefix}{REWARD_PREFIX}"
+        saved = {key.removeprefix(own): value for key, value in state_dict.items()
+                 if key.startswith(own)}
+        super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys,
+                                      unexpected_keys, error_msgs)
+        # torch counts the reward's keys as unexpected (not a registered child); they are ours.
+        unexpected_keys[:] = [key for key in unexpected_keys if not key.startswith(own)]
+        if not saved:
+            missing_keys += [own + key for key in self.reward.state_dict()]
+            return
+        result = self.reward.load_state_dict(saved, strict=False)
+        missing_keys += [own + key for key in result.missing_keys]
+        unexpected_keys += [own + key for key in result.unexpected_keys]
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
         inputs = [next_tensordict.get(key, None) for key in self.input_keys]
