@@ -5,7 +5,7 @@ import torch
 from rewards_mock_env import EmbeddingMockEnv
 from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, ReplayBuffer
-from torchrl.envs import Compose, TransformedEnv
+from torchrl.envs import Compose, FrameSkipTransform, RewardSum, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
 from temporal_torchrl.encoders import load_encoder
@@ -38,7 +38,31 @@ def _env(reward, episode_lengths=(3, 5, 8)):
 def test_specs_check(episode_lengths):
     env = _env(_reward(), episode_lengths)
     check_env_specs(env)
-    assert set(REWARD_KEYS) <= set(env.reward_keys)
+    # One reward, the shaped one, as TorchRL's losses, collectors and RewardSum expect; the
+    # parts beside it as observations (0 at a reset, as RewardSum's episode sum).
+    assert env.reward_keys == ["reward"] and env.reward_key == "reward"
+    assert set(REWARD_KEYS) - {"reward"} <= set(env.observation_spec.keys())
+    reset = env.reset()
+    assert all(reset[key].eq(0).all() for key in REWARD_KEYS if key != "reward")
+
+
+def test_torchrl_transforms_that_read_the_reward_key_work_after_it():
+    reward = _reward()
+    env = _env(reward, (4, 6))
+    env.append_transform(RewardSum())
+    check_env_specs(env)
+    rollout = env.rollout(10, break_when_any_done=False)
+    # RewardSum sums the shaped reward of each of the 2 envs, restarting at each one's own
+    # auto-reset (episodes of 4 and of 6 steps)
+    shaped = rollout["next", "reward"].squeeze(-1)
+    summed = rollout["next", "episode_reward"].squeeze(-1)
+    for env_index, start, end in ((0, 0, 4), (0, 4, 8), (1, 0, 6), (1, 6, 10)):
+        torch.testing.assert_close(summed[env_index, end - 1],
+                                   shaped[env_index, start:end].sum())
+    skipping = _env(_reward(), (12,))
+    skipping.append_transform(FrameSkipTransform(2))
+    check_env_specs(skipping)
+    assert skipping.rollout(3)["next", "reward"].shape == (3, 1)
 
 
 @pytest.mark.parametrize(("positional", "directional"),

@@ -32,7 +32,7 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from typing import TypeVar
+from typing import Any
 
 from torchrl import timeit
 
@@ -40,10 +40,8 @@ PREFIX = "time/"
 PHASES = ("env_step", "replay_sample", "relabel", "sac_update", "head_update", "episode_end",
           "checkpoint", "logging")
 
-Item = TypeVar("Item")
 
-
-def timed(iterable: Iterable[Item], phase: str) -> Iterator[Item]:
+def timed(iterable: Iterable[Any], phase: str) -> Iterator[Any]:
     """``iterable``'s items, the time of each ``next`` recorded under ``time/<phase>`` (a
     collector's step happens inside ``next``)."""
     iterator, end = iter(iterable), object()

@@ -14,6 +14,8 @@ from temporal_torchrl.transforms.history import WINDOW_KEY
 INPUT_KEYS = ("embedding", "initial_embedding", "previous_embedding", "success")
 
 
+#: The shaped reward's parts, written beside it as observations (the env's reward is "reward").
+COMPONENT_KEYS = tuple(key for key in REWARD_KEYS if key != "reward")
 #: Where the referenced reward's state sits in the transform's (and so the env's) state_dict.
 REWARD_PREFIX = "reward."
 
@@ -25,9 +27,10 @@ class TemporalRewardTransform(Transform):
     ``"success"`` of the *next* state (and ``"embedding_window"`` when the reward reads a window,
     ``reward.window_length`` not None) and writes ``"task_reward"``, ``"positional_reward"``,
     ``"directional_reward"``, ``"vlm_reward"`` and ``"reward"`` (all float32 ``[..., 1]``), with
-    the heads as they are now and without gradient. The extra keys are declared as reward
-    entries, so the env has several reward keys: name ``"reward"`` explicitly where TorchRL asks
-    for one (``env.reward_key`` raises with several).
+    the heads as they are now and without gradient. ``"reward"``, the shaped reward the agent
+    trains on, is the env's one reward key, as TorchRL's loss modules, collectors and
+    ``RewardSum`` expect; the four components are declared in the observation spec, as
+    ``RewardSum`` declares its episode sum, and are 0 at a reset (no transition yet).
 
     The same class serves two places:
 
@@ -116,7 +119,10 @@ class TemporalRewardTransform(Transform):
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase
                ) -> TensorDictBase:
-        # Rewards belong to transitions; a reset produces none.
+        # Rewards belong to transitions: the components read 0 until the first step.
+        for key in COMPONENT_KEYS:
+            tensordict_reset.set(key, torch.zeros((*tensordict_reset.batch_size, 1),
+                                                  device=tensordict_reset.device))
         return tensordict_reset
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -129,10 +135,16 @@ class TemporalRewardTransform(Transform):
 
     def transform_reward_spec(self, reward_spec: Composite) -> Composite:
         reward = reward_spec["reward"]
-        for key in REWARD_KEYS:
-            reward_spec[key] = Unbounded(shape=reward.shape, dtype=torch.float32,
-                                         device=reward.device)
+        reward_spec["reward"] = Unbounded(shape=reward.shape, dtype=torch.float32,
+                                          device=reward.device)
         return reward_spec
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        for key in COMPONENT_KEYS:
+            observation_spec[key] = Unbounded(shape=(*observation_spec.shape, 1),
+                                              dtype=torch.float32,
+                                              device=observation_spec.device)
+        return observation_spec
 
     def extra_repr(self) -> str:
         return f"reward={self.reward.extra_repr()}"
