@@ -775,38 +775,3 @@ def test_objectives_are_registered_and_checked(registry):
         register_reward("p6", toy_positional, kind="positional", image_input="window")
     with pytest.raises(ValueError, match="Unknown reward variant 'd9'"):
         objective_of("d9")
-
-
-def test_the_api_defaults_are_the_recipes():
-    """TemporalReward, make_temporal_reward, the finetuning losses and the trainer, each with its
-    defaults, train the reward that the recipe's config schema describes with its own."""
-    import dataclasses
-    import inspect
-
-    from temporal_torchrl.configs.recipe import RewardConfig
-    from temporal_torchrl.envs import make_temporal_reward
-    from temporal_torchrl.objectives import (
-        HEADS_LEARNING_RATE,
-        DirectionalLoss,
-        PositionalRankingLoss,
-    )
-    from temporal_torchrl.reward_quality.offline_finetuning import finetune_reward
-    from temporal_torchrl.rewards import reward_options
-    from temporal_torchrl.training import RewardHeadTrainer
-
-    def defaults(function, names):
-        parameters = inspect.signature(function).parameters
-        return {name: parameters[name].default for name in names}
-
-    recipe = dataclasses.asdict(RewardConfig())
-    arguments = reward_options({"reward": recipe})
-    assert defaults(TemporalReward, arguments) == arguments
-    assert defaults(make_temporal_reward, ["baseline"]) == {"baseline": recipe["baseline"]}
-    losses = {**defaults(PositionalRankingLoss, ["delta", "l2_margin"]),
-              **defaults(DirectionalLoss, ["same_position"])}
-    assert losses == {name: recipe[name] for name in losses}
-    trainer = defaults(RewardHeadTrainer, ["batch_size", "lr", *losses])
-    assert trainer == {name: recipe[name] for name in trainer}
-    offline = defaults(finetune_reward, ["batch_size", "lr", *losses])
-    assert offline == {name: recipe[name] for name in offline}
-    assert HEADS_LEARNING_RATE == recipe["lr"]

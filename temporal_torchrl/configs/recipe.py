@@ -3,17 +3,13 @@
 ``recipes/config.yaml`` names it first in its defaults list (``recipe_schema``), so Hydra
 refuses a value of the wrong type as it composes, naming the key; the ranges declared here with
 :func:`~temporal_torchrl.configs.fields.constrained` and the rules that relate keys or need code
-(:mod:`temporal_torchrl.configs.rules`) are checked before a run does any work. What each key
-means is documented once, in ``config.yaml``'s comments.
+(:mod:`temporal_torchrl.configs.rules`) are checked before a run does any work. The
+``reward.*`` keys are documented here, beside their defaults, which are the library's own
+(:mod:`temporal_torchrl.defaults`, read from there: the YAML files do not restate them); the other
+keys in ``config.yaml``'s comments.
 
 The ``Shared*`` classes hold the keys ``recipes/evaluate_rewards.py`` shares with the training
 recipe (:mod:`temporal_torchrl.configs.reward_quality`), so both state them once.
-
-The ``reward.*`` defaults restate :mod:`temporal_torchrl.rewards.defaults` rather than import
-it: ``temporal_torchrl.configs`` registers the schemas without importing torch (a config is
-composed and checked in a fraction of a second), and ``temporal_torchrl.rewards`` imports torch.
-``tests/test_rewards.py`` holds the two equal, and ``tests/test_configs.py`` the schema and
-``config.yaml``.
 """
 
 from __future__ import annotations
@@ -21,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from temporal_torchrl import defaults
 from temporal_torchrl.configs.fields import constrained
 
 #: ``replay_buffer.embedding_dtype``: the torch dtypes the buffer may store embeddings in.
@@ -66,31 +63,52 @@ class EncoderConfig:
 class SharedRewardConfig:
     """``reward.*`` keys of both recipes: the reward's parts, its heads and their losses."""
 
-    positional: str | None = "furl"
-    directional: str | None = "d3"
+    #: r_P: none | liv | furl | p1 | p2 | p3 | p4 | one registered by ``reward.modules``.
+    positional: str | None = defaults.POSITIONAL_REWARD
+    #: r_D: none | d1 ... d5 | d_certainty | d_sequence (beyond the thesis) | one registered.
+    directional: str | None = defaults.DIRECTIONAL_REWARD
+    #: .py files or module names imported first, to ``register_reward`` your own.
     modules: list[str] = field(default_factory=list)
-    k: int = constrained(5, ge=1)
-    alpha: float = constrained(0.4, ge=0, le=1)
-    baseline: str = "generic"
-    projection: str = constrained("origin", choices=PROJECTIONS)
-    delta: float = constrained(0.1, ge=0)
-    l2_margin: float = constrained(0.2, ge=0)
-    gap: int = constrained(10, ge=1)
-    same_position: bool = True
-    batch_size: int = constrained(256, ge=1)
-    lr: float = constrained(1.0e-4, gt=0)
-    label_window: int | None = constrained(20000, ge=1)
-    window: int = constrained(8, ge=2)
-    certainty_bandwidth: float = constrained(0.1, gt=0)
-    certainty_prior: float = constrained(1.0, gt=0)
+    #: k, the history offset of s_{t-k}.
+    k: int = constrained(defaults.HISTORY, ge=1)
+    #: alpha, the goal-baseline regularisation of P3, P4 and D5.
+    alpha: float = constrained(defaults.ALPHA, ge=0, le=1)
+    #: The baseline text b: generic | tailored | any text.
+    baseline: str = defaults.BASELINE
+    #: origin (the thesis's release) | line (VLM-RMs).
+    projection: str = constrained(defaults.PROJECTION, choices=PROJECTIONS)
+    #: delta, the ranking margin of the positional loss.
+    delta: float = constrained(defaults.DELTA, ge=0)
+    #: The stage-1 goal-distance margin.
+    l2_margin: float = constrained(defaults.L2_MARGIN, ge=0)
+    #: The pos-pos lag (and the first steps never drawn as positives).
+    gap: int = constrained(defaults.GAP, ge=1)
+    #: The directional loss as in the thesis text; false: the release's D4/D5.
+    same_position: bool = defaults.SAME_POSITION
+    #: States per finetuning batch of each kind.
+    batch_size: int = constrained(defaults.HEADS_BATCH_SIZE, ge=1)
+    #: The heads' Adam learning rate.
+    lr: float = constrained(defaults.HEADS_LEARNING_RATE, gt=0)
+    #: Positives and negatives are sampled from the most recent this many of each kind.
+    label_window: int | None = constrained(defaults.LABEL_WINDOW, ge=1)
+    #: d_sequence: K, the embeddings s_(t-K+1) .. s_t its sequence encoder reads.
+    window: int = constrained(defaults.WINDOW_LENGTH, ge=2)
+    #: d_certainty's target: the kernel width beta, in median distances.
+    certainty_bandwidth: float = constrained(defaults.CERTAINTY_BANDWIDTH, gt=0)
+    #: d_certainty's target: the pseudo-count c (little evidence: a target near 0).
+    certainty_prior: float = constrained(defaults.CERTAINTY_PRIOR, gt=0)
 
 
 @dataclass
 class RewardConfig(SharedRewardConfig):
     """``reward.*``."""
 
-    rho: float = constrained(1.0, ge=0)
-    lambda_: float = constrained(4.0, ge=0)
+    #: rho in r = r_task + rho (r_P + lambda r_D).
+    rho: float = constrained(defaults.RHO, ge=0)
+    #: lambda, the directional weight.
+    lambda_: float = constrained(defaults.LAMBDA, ge=0)
+    #: r_D times |certainty| at reward time (the thesis's 6.4 alternative; any directional
+    #: reward, e.g. d3).
     certainty_scaling: bool = False
 
 
@@ -126,9 +144,12 @@ class TrainConfig:
     save_positives: bool = False
     positives_from: str | None = None
     relay: bool = True
-    relay_periods: list[int] = constrained([50, 100, 150, 200], ge=1, nonempty=True)
-    relay_noise: float = constrained(0.2, ge=0)
-    relay_threshold: int = constrained(2500, ge=0)
+    #: Switch agents every period steps, one period drawn per episode.
+    relay_periods: list[int] = constrained(list(defaults.RELAY_PERIODS), ge=1, nonempty=True)
+    #: Gaussian noise on the relay agent's actions, times the action bound.
+    relay_noise: float = constrained(defaults.RELAY_NOISE, ge=0)
+    #: Positive states that end relay (stage 2's 50 preloaded: it never starts).
+    relay_threshold: int = constrained(defaults.RELAY_THRESHOLD, ge=0)
     random_steps: int = constrained(1000, ge=0)
     utd_ratio: float = constrained(1.0, ge=0)
     reward_updates_per_step: float = constrained(1.0, ge=0)

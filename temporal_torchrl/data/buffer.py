@@ -70,6 +70,7 @@ from temporal_torchrl.data.layouts import FinetuningLayout, TransitionLayout
 from temporal_torchrl.data.samplers import FinetuningSampler, TransitionSampler
 from temporal_torchrl.data.storage import EpisodeStorage
 from temporal_torchrl.data.writer import EpisodeWriter
+from temporal_torchrl.defaults import GAP, HISTORY, LABEL_WINDOW
 
 
 class EpisodeReplayBuffer(ReplayBuffer):
@@ -98,8 +99,9 @@ class EpisodeReplayBuffer(ReplayBuffer):
             the storage's. From a CPU storage to a GPU, batches go through pinned memory.
     """
 
-    def __init__(self, capacity: int, *, history: int = 5, window_length: int | None = None,
-                 label_window: int | None = 20_000, gap: int = 10, permanent_episodes: int = 0,
+    def __init__(self, capacity: int, *, history: int = HISTORY,
+                 window_length: int | None = None, label_window: int | None = LABEL_WINDOW,
+                 gap: int = GAP, permanent_episodes: int = 0,
                  reward: torch.nn.Module | None = None, batch_size: int | None = None,
                  finetuning_batch_size: int | None = None,
                  device: torch.device | str = "cpu",

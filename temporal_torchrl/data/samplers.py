@@ -14,6 +14,7 @@ from torchrl.data.replay_buffers.storages import Storage
 from temporal_torchrl.data.episodes import NEGATIVE, POSITIVE
 from temporal_torchrl.data.history import state_index, transition_index
 from temporal_torchrl.data.writer import EpisodeWriter
+from temporal_torchrl.defaults import GAP, LABEL_WINDOW
 from temporal_torchrl.rewards.temporal import check_window_length
 
 #: The finetuning groups, in the order :class:`FinetuningSampler` stacks them.
@@ -101,7 +102,7 @@ class FinetuningSampler(_EpisodeRowSampler):
     """
 
     def __init__(self, writer: EpisodeWriter, history: int, window_length: int | None, *,
-                 gap: int = 10, label_window: int | None = 20_000) -> None:
+                 gap: int = GAP, label_window: int | None = LABEL_WINDOW) -> None:
         super().__init__(writer, history, window_length)
         if gap < 1:
             raise ValueError(f"gap={gap} must be >= 1 (the positive pairs' lag).")

@@ -6,10 +6,10 @@ from typing import Any
 
 from torch import Tensor
 
+from temporal_torchrl.defaults import BASELINE
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.tasks import GENERIC_BASELINE, get_task
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.rewards.defaults import BASELINE
 
 
 def baseline_text(task: str, baseline: str = BASELINE) -> str:
@@ -50,7 +50,7 @@ def make_temporal_reward(task: str, encoder: Encoder, *, baseline: str = BASELIN
         baseline: ``generic``, ``tailored`` (the task's own, thesis 4.2.2) or any text.
         **reward_arguments: :class:`~temporal_torchrl.rewards.TemporalReward`'s arguments
             (``positional``, ``directional``, ``rho``, ``lambda_``, ``k``, ...), each defaulting
-            to the training recipe's (:mod:`~temporal_torchrl.rewards.defaults`).
+            to the training recipe's (:mod:`~temporal_torchrl.defaults`).
 
     Example:
         >>> from temporal_torchrl.encoders import load_encoder

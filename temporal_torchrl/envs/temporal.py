@@ -15,6 +15,7 @@ from typing import Any
 import torch
 from torchrl.envs import EnvBase, ParallelEnv, TransformedEnv
 
+from temporal_torchrl.defaults import HISTORY
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.metaworld_env import make_env
 from temporal_torchrl.rewards import TemporalReward
@@ -84,7 +85,7 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     if not isinstance(env, TransformedEnv):
         env = TransformedEnv(env)
     env.append_transform(EmbeddingTransform(encoder))
-    k = reward.k if reward is not None else (history or 5)
+    k = reward.k if reward is not None else (history or HISTORY)
     window = reward.window_length if reward is not None else None
     env.append_transform(EmbeddingHistoryTransform(k=k, window_length=window))
     if reward is not None:

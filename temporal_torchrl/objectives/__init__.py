@@ -1,6 +1,7 @@
 """Loss modules: SAC with stacked critics, and the reward-finetuning losses of the positional and
 directional heads (:mod:`.finetuning`: one loss a module, on one base)."""
 
+from temporal_torchrl.defaults import HEADS_LEARNING_RATE
 from temporal_torchrl.objectives.finetuning import (
     STAGES,
     CertaintyLoss,
@@ -12,7 +13,6 @@ from temporal_torchrl.objectives.finetuning import (
     remember_certainty_references,
 )
 from temporal_torchrl.objectives.sac import StackedCriticSACLoss, StackedQValueNetwork
-from temporal_torchrl.rewards.defaults import HEADS_LEARNING_RATE
 
 __all__ = [
     "HEADS_LEARNING_RATE",

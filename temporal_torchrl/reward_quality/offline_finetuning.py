@@ -14,18 +14,17 @@ import torch
 from tensordict import TensorDictBase
 from torch import Tensor
 
+from temporal_torchrl import defaults
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
+from temporal_torchrl.defaults import GAP, HISTORY, LABEL_WINDOW, STAGES
 from temporal_torchrl.objectives import HEADS_LEARNING_RATE
-from temporal_torchrl.rewards import TemporalReward, defaults
+from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.training import RewardHeadTrainer
-
-#: Finetuning stages (thesis 3.1.3): 1 from failed episodes only, 2 with successful ones too.
-STAGES = (1, 2)
 
 
 def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2,
-                           history: int = 5, label_window: int | None = 20_000,
-                           window_length: int | None = None, gap: int = 10,
+                           history: int = HISTORY, label_window: int | None = LABEL_WINDOW,
+                           window_length: int | None = None, gap: int = GAP,
                            embedding_dtype: torch.dtype = torch.float16) -> EpisodeReplayBuffer:
     """A replay buffer holding the training episodes the finetuning losses sample from.
 
@@ -55,7 +54,8 @@ def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2
 
 
 def finetune_reward(reward: TemporalReward, buffer: EpisodeReplayBuffer,
-                    goal_image_embedding: Tensor, *, updates: int, batch_size: int = 256,
+                    goal_image_embedding: Tensor, *, updates: int,
+                    batch_size: int = defaults.HEADS_BATCH_SIZE,
                     lr: float = HEADS_LEARNING_RATE, delta: float = defaults.DELTA,
                     l2_margin: float = defaults.L2_MARGIN,
                     same_position: bool = defaults.SAME_POSITION) -> dict[str, float]:

@@ -1,7 +1,7 @@
 """Positional and directional VLM rewards (thesis chapter 4) and their trainable heads.
 
 Add a reward of your own with :func:`register_reward`; build the reward a config describes with
-:func:`reward_from_config`. Every default is written once, in :mod:`.defaults`.
+:func:`reward_from_config`. Every default is written once, in :mod:`temporal_torchrl.defaults`.
 """
 
 from temporal_torchrl.rewards.certainty import (

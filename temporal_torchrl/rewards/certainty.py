@@ -35,7 +35,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from temporal_torchrl.rewards.defaults import CERTAINTY_BANDWIDTH, CERTAINTY_PRIOR
+from temporal_torchrl.defaults import CERTAINTY_BANDWIDTH, CERTAINTY_PRIOR
 from temporal_torchrl.rewards.directional import _concatenated
 from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.positional import EPS, _required, unit

@@ -28,7 +28,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from temporal_torchrl.rewards.defaults import ALPHA, PROJECTION
+from temporal_torchrl.defaults import ALPHA, PROJECTION
 from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.positional import (
     _required,

@@ -21,7 +21,7 @@ from typing import Any
 
 from torch import Tensor
 
-from temporal_torchrl.rewards.defaults import ALPHA, PROJECTION
+from temporal_torchrl.defaults import ALPHA, PROJECTION
 
 #: A reward function; see :func:`register_reward` for the signature it must follow.
 RewardFunction = Callable[..., Tensor]
@@ -129,8 +129,8 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         fn(heads, s, *, g, b, s0=None, s_prev=None, alpha=ALPHA, position=None,
            projection=PROJECTION, window=None, **unused) -> Tensor
 
-    (:data:`~temporal_torchrl.rewards.defaults.ALPHA`,
-    :data:`~temporal_torchrl.rewards.defaults.PROJECTION`: callers always pass both.)
+    (:data:`~temporal_torchrl.defaults.ALPHA`,
+    :data:`~temporal_torchrl.defaults.PROJECTION`: callers always pass both.)
 
     - ``heads``: the :class:`~temporal_torchrl.rewards.RewardHeads` (``heads.image``,
       ``heads.text``), or None when ``image_input=None``.

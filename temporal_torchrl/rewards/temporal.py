@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from temporal_torchrl.rewards import defaults
+from temporal_torchrl import defaults
 from temporal_torchrl.rewards.certainty import CertaintyMemory
 from temporal_torchrl.rewards.heads import RewardHeads, heads_input_dims
 from temporal_torchrl.rewards.positional import PROJECTIONS
@@ -32,7 +32,7 @@ class TemporalReward(nn.Module):
 
     r_t = r^task_t + rho (r^VLM_P(s_t) + lambda r^VLM_D(s_t)),  r^task_t = success_t - 1.
 
-    Every default is the training recipe's (:mod:`~temporal_torchrl.rewards.defaults`): the
+    Every default is the training recipe's (:mod:`~temporal_torchrl.defaults`): the
     thesis's best reward, FuRL + D3 at rho 1, lambda 4 (section 5.3.3).
 
     Args:

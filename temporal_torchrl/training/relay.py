@@ -49,10 +49,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.data import TensorSpec
 
-#: The release's switching periods, noise scale and positive-state threshold.
-RELAY_PERIODS = (50, 100, 150, 200)
-RELAY_NOISE = 0.2
-RELAY_THRESHOLD = 2500
+from temporal_torchrl.defaults import RELAY_NOISE, RELAY_PERIODS, RELAY_THRESHOLD
 
 
 class RelaySchedule:

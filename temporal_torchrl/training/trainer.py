@@ -10,9 +10,9 @@ from torch import Tensor
 from torchrl.data import ReplayBuffer
 from torchrl.objectives import LossModule
 
+from temporal_torchrl.defaults import DELTA, HEADS_BATCH_SIZE, L2_MARGIN, SAME_POSITION
 from temporal_torchrl.objectives import HEADS_LEARNING_RATE, finetuning_losses
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.rewards.defaults import DELTA, L2_MARGIN, SAME_POSITION
 
 
 class RewardHeadTrainer:
@@ -57,7 +57,7 @@ class RewardHeadTrainer:
     """
 
     def __init__(self, reward: TemporalReward, goal_image_embedding: Tensor,
-                 replay: ReplayBuffer, *, batch_size: int = 256,
+                 replay: ReplayBuffer, *, batch_size: int = HEADS_BATCH_SIZE,
                  lr: float = HEADS_LEARNING_RATE, delta: float = DELTA,
                  l2_margin: float = L2_MARGIN, same_position: bool = SAME_POSITION,
                  compile: bool = False,

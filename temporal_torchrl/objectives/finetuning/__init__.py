@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from torch import Tensor
 
+from temporal_torchrl.defaults import DELTA, L2_MARGIN, SAME_POSITION
 from temporal_torchrl.objectives.finetuning.base import STAGES, FinetuningLoss
 from temporal_torchrl.objectives.finetuning.certainty import (
     CertaintyLoss,
@@ -39,7 +40,6 @@ from temporal_torchrl.objectives.finetuning.certainty import (
 from temporal_torchrl.objectives.finetuning.directional import DirectionalLoss
 from temporal_torchrl.objectives.finetuning.positional import PositionalRankingLoss, ranking_loss
 from temporal_torchrl.rewards import TemporalReward, objective_of
-from temporal_torchrl.rewards.defaults import DELTA, L2_MARGIN, SAME_POSITION
 
 
 def finetuning_losses(reward: TemporalReward, goal_image_embedding: Tensor, *, stage: int,

@@ -7,10 +7,10 @@ from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 from torchrl.objectives import LossModule
 
+from temporal_torchrl.defaults import STAGES
 from temporal_torchrl.rewards import RewardHeads, TemporalReward
 
 #: Finetuning stages (thesis 3.1.3.1 and 3.1.3.2): 1 from negatives only, 2 with positives too.
-STAGES = (1, 2)
 
 
 class FinetuningLoss(LossModule):

@@ -7,10 +7,10 @@ from dataclasses import dataclass
 from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 
+from temporal_torchrl.defaults import SAME_POSITION
 from temporal_torchrl.objectives.finetuning.base import FinetuningLoss, joined
 from temporal_torchrl.objectives.finetuning.certainty import remember_certainty_references
 from temporal_torchrl.rewards import DIRECTIONAL, TemporalReward
-from temporal_torchrl.rewards.defaults import SAME_POSITION
 
 
 class DirectionalLoss(FinetuningLoss):
@@ -42,7 +42,7 @@ class DirectionalLoss(FinetuningLoss):
         goal_image_embedding: s_g ``[D]``.
         stage: 1 or 2 (see :class:`~temporal_torchrl.objectives.finetuning.base.FinetuningLoss`).
         same_position: ``True`` (the default,
-            :data:`~temporal_torchrl.rewards.defaults.SAME_POSITION`; the thesis text): the
+            :data:`~temporal_torchrl.defaults.SAME_POSITION`; the thesis text): the
             towards-goal and opposite terms use the variant's own position part at s_t, like the
             observed term. ``False`` reproduces the thesis's release, where D4 and D5 score those
             two terms with the plain position n(s_t) (D3's input) while the observed term keeps

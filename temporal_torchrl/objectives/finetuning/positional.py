@@ -7,10 +7,10 @@ from collections.abc import Callable
 from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 
+from temporal_torchrl.defaults import DELTA, L2_MARGIN
 from temporal_torchrl.modules import relu
 from temporal_torchrl.objectives.finetuning.base import FinetuningLoss, joined
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.rewards.defaults import DELTA, L2_MARGIN
 
 #: The state keys a positional reward reads.
 POSITIONAL_KEYS = ("embedding", "initial_embedding", "previous_embedding")
@@ -38,9 +38,9 @@ class PositionalRankingLoss(FinetuningLoss):
             goal and baseline text embeddings, alpha and projection are used as they are).
         goal_image_embedding: s_g ``[D]``, see :func:`temporal_torchrl.data.goal_image_embedding`.
         stage: 1 or 2 (see :class:`~temporal_torchrl.objectives.finetuning.base.FinetuningLoss`).
-        delta: ranking margin (default :data:`~temporal_torchrl.rewards.defaults.DELTA`).
+        delta: ranking margin (default :data:`~temporal_torchrl.defaults.DELTA`).
         l2_margin: how much closer to s_g a negative must be to be preferred (default
-            :data:`~temporal_torchrl.rewards.defaults.L2_MARGIN`).
+            :data:`~temporal_torchrl.defaults.L2_MARGIN`).
 
     Example:
         >>> import torch

@@ -1,11 +1,14 @@
-"""The defaults of the reward and its finetuning, each written once.
+"""The defaults the library, the recipes' config schemas and the presets share, each written once.
 
-:class:`~temporal_torchrl.rewards.TemporalReward`, the reward functions, the finetuning losses
-(:mod:`temporal_torchrl.objectives`) and the reward-head trainer default to these values, which
-are the training recipe's ``reward.*`` defaults (:mod:`temporal_torchrl.configs.recipe`): a reward
+The reward (:class:`~temporal_torchrl.rewards.TemporalReward`, the reward functions), its
+finetuning (the losses in :mod:`temporal_torchrl.objectives`, the trainer, the replay's
+finetuning sampler), the k-step history and relay exploration default to these values, and so do
+the recipe's config schemas (:mod:`temporal_torchrl.configs`), which read them from here: a piece
 composed from the API with its defaults is the one ``recipes/sac_temporal.py`` trains with its
 own, the thesis's best, FuRL with D3 at rho 1, lambda 4 (section 5.3.3, Table 5.12). The thesis's
 other configurations are the recipe's presets (``recipes/preset/``).
+
+The module imports nothing, so the config schemas stay free of torch.
 """
 
 #: The positional reward r_P (thesis 3.1.3, FuRL).
@@ -45,5 +48,21 @@ L2_MARGIN = 0.2
 #: The directional loss's contrasted terms at the variant's own position (the thesis text, 4.3.3);
 #: False: the release's plain position for D4 and D5.
 SAME_POSITION = True
+#: States of each kind per finetuning batch (the thesis release).
+HEADS_BATCH_SIZE = 256
 #: The heads' Adam learning rate (the thesis release, LukasWill/directional_vlm_rl).
 HEADS_LEARNING_RATE = 1e-4
+#: The finetuning's stages (thesis 3.1.3): 1 from failed episodes only, 2 with successful ones.
+STAGES = (1, 2)
+#: The finetuning samples its positive and negative states from the most recent this many of
+#: each kind (FuRL's FIFO of 20,000; the thesis release).
+LABEL_WINDOW = 20_000
+#: The lag of the positional loss's pos-pos pairs, and the first steps of an episode that are
+#: never drawn as its positive states (FuRL, the thesis release).
+GAP = 10
+#: Relay exploration (FuRL, the thesis release): the periods one of which each episode switches
+#: agents by, the Gaussian noise on the relay agent's actions (times the action bound) and the
+#: positive states that end relay.
+RELAY_PERIODS = (50, 100, 150, 200)
+RELAY_NOISE = 0.2
+RELAY_THRESHOLD = 2500
