@@ -107,8 +107,8 @@ class RewardConfig(SharedRewardConfig):
     rho: float = constrained(defaults.RHO, ge=0)
     #: lambda, the directional weight.
     lambda_: float = constrained(defaults.LAMBDA, ge=0)
-    #: r_D times |certainty| at reward time (the thesis's 6.4 alternative; any directional
-    #: reward, e.g. d3).
+    #: r_D times the certainty's magnitude at reward time (the thesis's 6.4 alternative; any
+    #: directional reward, e.g. d3).
     certainty_scaling: bool = False
 
 
