@@ -26,8 +26,11 @@ LAMBDA = 4.0
 HISTORY = 5
 #: alpha, the goal-baseline regularisation strength of P3, P4 and D5 (thesis 3.1.2, eq. 4.5).
 ALPHA = 0.4
-#: The goal-baseline projection (``"origin"``, the thesis's release; see
-#: :mod:`~temporal_torchrl.rewards.positional`).
+#: The goal-baseline projection forms: onto the direction g - b from the origin (the thesis's
+#: release) or onto the line through b and g (VLM-RMs); see
+#: :mod:`~temporal_torchrl.rewards.positional`.
+PROJECTIONS = ("origin", "line")
+#: The goal-baseline projection (``"origin"``, the thesis's release).
 PROJECTION = "origin"
 #: K, the embeddings s_{t-K+1} .. s_t a window reward (d_sequence) reads (beyond the thesis,
 #: section 6.3 proposal).

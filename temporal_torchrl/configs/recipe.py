@@ -25,9 +25,6 @@ EMBEDDING_DTYPES = ("float16", "bfloat16", "float32")
 #: ``compile.mode``: torch.compile's modes (null: its default).
 COMPILE_MODES = ("default", "reduce-overhead", "max-autotune", "max-autotune-no-cudagraphs")
 LOGGER_BACKENDS = ("wandb", "csv", "none")
-#: ``reward.projection``: onto the goal from the origin (the thesis's release) or along the
-#: baseline-goal line (VLM-RMs).
-PROJECTIONS = ("origin", "line")
 
 
 @dataclass
@@ -76,7 +73,7 @@ class SharedRewardConfig:
     #: The baseline text b: generic | tailored | any text.
     baseline: str = defaults.BASELINE
     #: origin (the thesis's release) | line (VLM-RMs).
-    projection: str = constrained(defaults.PROJECTION, choices=PROJECTIONS)
+    projection: str = constrained(defaults.PROJECTION, choices=defaults.PROJECTIONS)
     #: delta, the ranking margin of the positional loss.
     delta: float = constrained(defaults.DELTA, ge=0)
     #: The stage-1 goal-distance margin.

@@ -35,14 +35,12 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from temporal_torchrl.defaults import ALPHA, PROJECTION
+from temporal_torchrl.defaults import ALPHA, PROJECTION, PROJECTIONS
 from temporal_torchrl.rewards.heads import RewardHeads
 from temporal_torchrl.rewards.registry import register_reward
 
 #: Floor on vector norms in every normalisation (zero vectors map to zero, not NaN).
 EPS = 1e-8
-#: Goal-baseline projection forms; see the module docstring.
-PROJECTIONS = ("origin", "line")
 
 
 def clamped_norm(x: Tensor) -> Tensor:

@@ -8,7 +8,6 @@ from torch import Tensor, nn
 from temporal_torchrl import defaults
 from temporal_torchrl.rewards.certainty import CertaintyMemory
 from temporal_torchrl.rewards.heads import RewardHeads, heads_input_dims
-from temporal_torchrl.rewards.positional import PROJECTIONS
 from temporal_torchrl.rewards.registry import DIRECTIONAL, POSITIONAL, REWARDS, registered
 
 REWARD_KEYS = ("task_reward", "positional_reward", "directional_reward", "vlm_reward", "reward")
@@ -116,9 +115,9 @@ class TemporalReward(nn.Module):
         if not 0.0 <= alpha <= 1.0:
             raise ValueError(f"alpha={alpha!r}; expected 0 <= alpha <= 1 (the goal-baseline "
                              "regularisation strength).")
-        if projection not in PROJECTIONS:
+        if projection not in defaults.PROJECTIONS:
             raise ValueError(f"projection={projection!r}; expected one of "
-                             f"{', '.join(PROJECTIONS)}.")
+                             f"{', '.join(defaults.PROJECTIONS)}.")
         check_window_length(window_length)
         if not certainty_bandwidth > 0 or not certainty_prior > 0:
             raise ValueError(f"certainty_bandwidth={certainty_bandwidth!r}, certainty_prior="
