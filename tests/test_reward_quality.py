@@ -19,9 +19,11 @@ from temporal_torchrl.reward_quality import (
     finetune_reward,
     load_or_collect,
     make_finetuning_buffer,
+    prepare_task,
     score_reward,
     spearman_correlation,
     split_by_episode,
+    task_config,
     value_order_correlation,
 )
 from temporal_torchrl.reward_quality import dataset as dataset_module
@@ -399,8 +401,7 @@ def test_recipe_scores_every_variant_end_to_end(tmp_path, my_reward_module):
                                                   for heads in ("untrained", "finetuned")}
     # The held-out episodes the recipe scored on, and its goal and baseline texts.
     encoder = load_encoder("state", dim=16)
-    data = evaluate_rewards.prepare_task(evaluate_rewards.task_config(cfg, cfg.env.task),
-                                         encoder)
+    data = prepare_task(task_config(cfg, cfg.env.task), encoder)
     assert len(data.successful) == 1 and len(data.failed) == 2
     for variant, heads_state in [("liv", "zero-shot"), ("p3", "untrained"),
                                  ("p4", "untrained"), ("d5", "untrained")]:

@@ -27,20 +27,21 @@ from pathlib import Path
 import torch
 from hydra import compose, initialize_config_dir
 
-RECIPES = Path(__file__).resolve().parents[3] / "recipes"
-sys.path.insert(0, str(RECIPES))
-
-import evaluate_rewards  # noqa: E402
-
-from temporal_torchrl.configs.rules import (  # noqa: E402
+from temporal_torchrl.configs.rules import (
     config_tasks,
     validate_reward_quality_config,
 )
-from temporal_torchrl.reward_quality import (  # noqa: E402
+from temporal_torchrl.machine import machine_description
+from temporal_torchrl.reward_quality import (
     make_finetuning_buffer,
+    prepare_task,
+    task_config,
 )
-from temporal_torchrl.rewards import direction_certainty, reference_scales  # noqa: E402
-from temporal_torchrl.training import factories  # noqa: E402
+from temporal_torchrl.rewards import direction_certainty, reference_scales
+from temporal_torchrl.training import factories
+
+#: The recipes' config folder, whose ``evaluate_rewards.yaml`` the study composes.
+RECIPES = Path(__file__).resolve().parents[3] / "recipes"
 
 BANDWIDTHS = (0.05, 0.1, 0.2, 0.3)
 PRIORS = (0.5, 1.0, 2.0)
@@ -50,7 +51,7 @@ KINDS = ("observed positive", "observed negative", "opposite", "towards goal", "
 
 def task_targets(cfg, encoder) -> dict[tuple[float, float], dict[str, float]]:
     """Mean target per query kind, per (beta, c), over BATCHES batches of one task."""
-    data = evaluate_rewards.prepare_task(cfg, encoder)
+    data = prepare_task(cfg, encoder)
     train, goal = data.train, data.goal_image
     buffer = make_finetuning_buffer(train.episodes, history=cfg.reward.k,
                                     label_window=cfg.reward.label_window)
@@ -92,7 +93,7 @@ def main(overrides: list[str]) -> None:
     encoder = factories.make_encoder(cfg)
     start = time.perf_counter()
     tasks = config_tasks(cfg)
-    per_task = {task: task_targets(evaluate_rewards.task_config(cfg, task), encoder)
+    per_task = {task: task_targets(task_config(cfg, task), encoder)
                 for task in tasks}
     lines = [
         "# d_certainty: calibration of the certainty target", "",
@@ -103,7 +104,7 @@ def main(overrides: list[str]) -> None:
         "directions leave themselves out; 'unseen' is a random direction at a positive state.",
         "", f"- command: `python docs/results/beyond_thesis/calibrate_certainty.py "
         f"{' '.join(overrides)}`",
-        f"- machine: {evaluate_rewards.machine_description()}; wall time "
+        f"- machine: {machine_description()}; wall time "
         f"{time.perf_counter() - start:.0f} s", "",
         "| beta | c | " + " | ".join(KINDS) + " |", "|---|---|" + "---|" * len(KINDS)]
     for beta in BANDWIDTHS:

@@ -29,26 +29,27 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch import Tensor
 
-RECIPES = Path(__file__).resolve().parents[3] / "recipes"
-sys.path.insert(0, str(RECIPES))
-
-import evaluate_rewards  # noqa: E402
-
-from temporal_torchrl.configs.rules import (  # noqa: E402
+from temporal_torchrl.configs.rules import (
     config_tasks,
     validate_reward_quality_config,
 )
-from temporal_torchrl.reward_quality import (  # noqa: E402
+from temporal_torchrl.machine import machine_description
+from temporal_torchrl.reward_quality import (
     auroc,
     direction_accuracy,
     episode_embeddings,
     finetune_reward,
     make_finetuning_buffer,
+    prepare_task,
     state_rewards,
     success_length,
+    task_config,
 )
-from temporal_torchrl.rewards import TemporalReward, single_part  # noqa: E402
-from temporal_torchrl.training import factories  # noqa: E402
+from temporal_torchrl.rewards import TemporalReward, single_part
+from temporal_torchrl.training import factories
+
+#: The recipes' config folder, whose ``evaluate_rewards.yaml`` the study composes.
+RECIPES = Path(__file__).resolve().parents[3] / "recipes"
 
 #: (label, variant, certainty scaling)
 CONFIGURATIONS = (("d3", "d3", False), ("d_certainty", "d_certainty", False),
@@ -88,7 +89,7 @@ def shape(reward: TemporalReward, successful, failed) -> dict[str, float]:
 
 
 def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
-    data = evaluate_rewards.prepare_task(cfg, encoder)
+    data = prepare_task(cfg, encoder)
     train, successful, failed = data.train, data.successful, data.failed
     goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
@@ -118,7 +119,7 @@ def main(overrides: list[str]) -> None:
     start = time.perf_counter()
     encoder = factories.make_encoder(cfg)
     tasks = config_tasks(cfg)
-    per_task = {task: task_shapes(evaluate_rewards.task_config(cfg, task), encoder)
+    per_task = {task: task_shapes(task_config(cfg, task), encoder)
                 for task in tasks}
     lines = ["# The shape of the finetuned directional reward: D3, d_certainty, D3 x certainty",
              "", f"Held-out steps of the reward-quality benchmark ({encoder.name} encoder, "
@@ -143,7 +144,7 @@ def main(overrides: list[str]) -> None:
                 for column in COLUMNS) + " |")
     lines += ["", f"- command: `python docs/results/beyond_thesis/reward_shape.py "
               f"{' '.join(overrides)}`",
-              f"- machine: {evaluate_rewards.machine_description()}; wall time "
+              f"- machine: {machine_description()}; wall time "
               f"{time.perf_counter() - start:.0f} s"]
     output = Path(__file__).with_name("reward_shape.md")
     output.write_text("\n".join(lines) + "\n")

@@ -27,23 +27,24 @@ from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 from torch import Tensor, nn
 
-RECIPES = Path(__file__).resolve().parents[3] / "recipes"
-sys.path.insert(0, str(RECIPES))
-
-import evaluate_rewards  # noqa: E402
-
-from temporal_torchrl.configs.rules import (  # noqa: E402
+from temporal_torchrl.configs.rules import (
     config_tasks,
     validate_reward_quality_config,
 )
-from temporal_torchrl.objectives import finetuning_losses  # noqa: E402
-from temporal_torchrl.reward_quality import (  # noqa: E402
+from temporal_torchrl.machine import machine_description
+from temporal_torchrl.objectives import finetuning_losses
+from temporal_torchrl.reward_quality import (
     finetune_reward,
     make_finetuning_buffer,
+    prepare_task,
     score_reward,
+    task_config,
 )
-from temporal_torchrl.rewards import TemporalReward, single_part  # noqa: E402
-from temporal_torchrl.training import factories  # noqa: E402
+from temporal_torchrl.rewards import TemporalReward, single_part
+from temporal_torchrl.training import factories
+
+#: The recipes' config folder, whose ``evaluate_rewards.yaml`` the study composes.
+RECIPES = Path(__file__).resolve().parents[3] / "recipes"
 
 ENCODERS = ("transformer", "convolution")
 
@@ -102,7 +103,7 @@ def update_milliseconds(reward: TemporalReward, dim: int, window_length: int,
 
 def task_scores(cfg, encoder) -> dict[str, tuple[float, float]]:
     """(direction accuracy, AUROC) of each image head after finetuning, on one task."""
-    data = evaluate_rewards.prepare_task(cfg, encoder)
+    data = prepare_task(cfg, encoder)
     train, successful, failed = data.train, data.successful, data.failed
     goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
@@ -150,7 +151,7 @@ def main(overrides: list[str]) -> None:
         print(lines[-1], flush=True)
     encoder = factories.make_encoder(cfg)
     tasks = config_tasks(cfg)
-    per_task = {task: task_scores(evaluate_rewards.task_config(cfg, task), encoder)
+    per_task = {task: task_scores(task_config(cfg, task), encoder)
                 for task in tasks}
     lines += ["", f"Reward quality after {cfg.finetune.updates} updates (stage "
               f"{cfg.finetune.stage}, batch {cfg.reward.batch_size}, lr {cfg.reward.lr}), "
@@ -167,7 +168,7 @@ def main(overrides: list[str]) -> None:
                                           for name in ENCODERS) + " |")
     lines += ["", f"- command: `python docs/results/beyond_thesis/sequence_encoders.py "
               f"{' '.join(overrides)}`",
-              f"- machine: {evaluate_rewards.machine_description()}, shared with other jobs "
+              f"- machine: {machine_description()}, shared with other jobs "
               f"(the update times are relative); wall time {time.perf_counter() - start:.0f} s"]
     output = Path(__file__).with_name(f"sequence_encoders_updates{cfg.finetune.updates}.md")
     output.write_text("\n".join(lines) + "\n")
