@@ -5,18 +5,20 @@ samples; render -> embed -> history -> reward, the reward only logged) is follow
 reward-head update and one SAC update on batches from the episode replay buffer, whose transform
 relabels SAC's rewards from the stored embeddings with the heads as they are now. Each ended
 episode is labelled and inserted into the buffer, then an episode row and a checkpoint are
-written.
+written; every ``eval.every`` episodes the deterministic policy is evaluated apart from training.
 
     python recipes/sac_temporal.py                                # quick default (offline, CPU)
     python recipes/sac_temporal.py preset=best protocol=stage2 env.task=door-open env.seed=2
     python recipes/sac_temporal.py preset=best protocol=stage2 resume=true  # continue a killed run
     python recipes/sac_temporal.py output_dir=runs/x resume=true train.episodes=2000  # extend it
+    python recipes/sac_temporal.py preset=sac env.goal=random eval.every=10  # random goals
 
 Outputs in ``output_dir`` (default: ``runs/<task>/<method>_<protocol>/seed<seed>``, see
 :func:`temporal_torchrl.runs.default_run_dir`; layout in
 :mod:`temporal_torchrl.runs.directory`): ``episodes.csv`` (episode, env_steps, success, return =
-sum of sparse task rewards, mean_vlm_reward, stage), ``summary.json`` (TTFS, TT50S, RAS,
-throughput, the resolved config, the last training metrics), ``checkpoint.pt`` + ``replay/``
+sum of sparse task rewards, mean_vlm_reward, stage), ``eval.csv`` (with ``eval.every``: one row
+per evaluation), ``summary.json`` (TTFS, TT50S, RAS, the last and best evaluation, throughput,
+the resolved config, the last training metrics), ``checkpoint.pt`` + ``replay/``
 (resume), ``metrics.jsonl`` (whatever ``logger.backend``: per-episode rows and, every
 ``logger.log_every`` updates, SAC's and the heads' losses and the relabelled reward statistics;
 what reports read) and the same in ``logs/`` (CSV logger) or ``wandb/``.
@@ -36,6 +38,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig
 from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
 from torchrl import timeit
 from torchrl.collectors import Collector
 from tqdm import tqdm
@@ -65,6 +68,7 @@ from temporal_torchrl.training import (
     run_summary,
     start_run,
 )
+from temporal_torchrl.training.evaluation import PolicyEvaluation
 from temporal_torchrl.training.relay import NoRelay, RelayExploration
 from temporal_torchrl.training.timing import PhaseClock, timed
 
@@ -96,6 +100,8 @@ class Training:
     buffer: EpisodeReplayBuffer
     trainer: RewardHeadTrainer | None  # None: no finetuned heads
     relay: RelayExploration | NoRelay
+    actor: TensorDictModuleBase  # SAC's policy, which the evaluation runs deterministically
+    evaluation: PolicyEvaluation | None  # None: no evaluation episodes (eval.every=null)
     update_sac: Callable[[TensorDictBase], TensorDictBase]
     state: TrainingState  # its progress: the counters the loop advances
     collector: Collector
@@ -150,9 +156,10 @@ def build(start: RunStart, run_dir: RunDirectory) -> Training:
     collector = factories.make_collector(cfg, env, relay.policy,
                                          max(0, cfg.train.random_steps - progress.env_steps))
     random_until = progress.env_steps + collector.init_random_frames
+    evaluation = factories.make_evaluation(cfg)
     start.restore_rng()  # after every random draw the build makes
-    return Training(encoder, buffer, trainer, relay, update_sac, state, collector, random_until,
-                    factories.make_logger(cfg, run_dir.path))
+    return Training(encoder, buffer, trainer, relay, actor, evaluation, update_sac, state,
+                    collector, random_until, factories.make_logger(cfg, run_dir.path))
 
 
 def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] | None,
@@ -197,6 +204,16 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
             if progress.updates % cfg.logger.log_every == 0:
                 log_training_metrics()
 
+    @timeit("time/evaluation")
+    def evaluate() -> None:
+        """The deterministic policy on the evaluation layouts, after episode
+        ``progress.episode``: a row of ``eval.csv``, logged at the training's env steps."""
+        result = training.evaluation(training.actor)
+        run_dir.append_evaluation({"episode": progress.episode,
+                                   "env_steps": progress.env_steps} | result)
+        log_metrics(logger, {f"eval/{key}": float(value) for key, value in result.items()
+                             if key != "episodes"}, progress.env_steps)
+
     @timeit("time/episode_end")
     def finish_episode(index: int) -> None:
         """Env ``index``'s episode ended: labelled and inserted, saved, its row logged."""
@@ -235,6 +252,8 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
         for index in ended[:cfg.train.episodes - progress.episode]:  # in env order
             finish_episode(index)
             bar.update(1)
+            if training.evaluation is not None and progress.episode % cfg.eval.every == 0:
+                evaluate()
         relay.end_if_enough(buffer.num_positive_states)
         steps_per_second = (progress.env_steps - start_steps) / (time.perf_counter() - start_time)
         bar.set_postfix(success_rate=f"{sum(progress.successes) / len(progress.successes):.2f}",
@@ -255,7 +274,8 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
     summary = run_summary(
         cfg, progress, encoder=cfg.encoder.name if training.encoder is not None else None,
         steps_per_second=(progress.env_steps - start_steps) / (time.perf_counter() - start_time),
-        relay_steps=relay.total_steps, phase_seconds=clock.totals())
+        relay_steps=relay.total_steps, phase_seconds=clock.totals(),
+        evaluations=run_dir.evaluation_rows())
     run_dir.write_summary(summary)
     log_metrics(logger, {f"summary/{key}": float(summary[key]) for key in ("ttfs", "tt50s")},
                 progress.env_steps)

@@ -69,3 +69,10 @@ GAP = 10
 RELAY_PERIODS = (50, 100, 150, 200)
 RELAY_NOISE = 0.2
 RELAY_THRESHOLD = 2500
+#: ``env.goal``: one layout per run, restored at every reset (the thesis's protocol), or a new
+#: layout at every reset (Metaworld's benchmark setting, FuRL's; the thesis's section 6).
+GOALS = ("fixed", "random")
+GOAL = "fixed"
+#: Evaluation episodes of the deterministic policy per evaluation (FuRL's code: 10 on random
+#: goals).
+EVAL_EPISODES = 10

@@ -44,6 +44,21 @@ class EnvConfig(SharedEnvConfig):
     """``env.*``."""
 
     num_envs: int = constrained(1, ge=1)
+    #: fixed: one layout per run, from env.seed (the thesis) | random: a new layout at every
+    #: reset, from a stream seeded by env.seed (the goal then observable).
+    goal: str = constrained(defaults.GOAL, choices=defaults.GOALS)
+
+
+@dataclass
+class EvalConfig:
+    """``eval.*``: evaluation episodes of the deterministic policy, apart from training (none in
+    the thesis's protocol)."""
+
+    #: Evaluate after every this many training episodes (null: never).
+    every: int | None = constrained(None, ge=1)
+    #: Episodes per evaluation: random goals, each on its own held-out layout (the same ones at
+    #: every evaluation); fixed goals, on the run's layout.
+    episodes: int = constrained(defaults.EVAL_EPISODES, ge=1)
 
 
 @dataclass
@@ -187,6 +202,7 @@ class RecipeConfig:
     sac: SACConfig = field(default_factory=SACConfig)
     replay_buffer: ReplayBufferConfig = field(default_factory=ReplayBufferConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
     compile: CompileConfig = field(default_factory=CompileConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     output_dir: str | None = None

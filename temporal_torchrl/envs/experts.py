@@ -25,8 +25,9 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
                             noise: float = 0.1, render: bool = False, image_size: int = 224,
                             camera: str = "corner2", fast_render: bool = True,
                             steps_after_success: int | None = 5, max_episode_steps: int = 500,
-                            generator_seed: int | None = None) -> list[TensorDict]:
-    """Run Metaworld's scripted policy on the fixed-goal, goal-hidden task.
+                            generator_seed: int | None = None, goal: str = "fixed",
+                            stream_index: int = 0) -> list[TensorDict]:
+    """Run Metaworld's scripted policy on the task (fixed goal and goal-hidden by default).
 
     Each action is the expert's action plus Gaussian noise, a = clip(pi(o) + noise * eps, -1, 1)
     with eps ~ N(0, I): with a fixed goal and no noise every episode would be identical.
@@ -52,6 +53,10 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
         max_episode_steps: episode length when no success happens.
         generator_seed: seed of the noise generator; ``None`` derives it from ``seed``, so the
             same call returns the same episodes.
+        goal: ``"fixed"`` (the layout ``seed``) or ``"random"``: each episode on a new layout
+            from the seed's ``"experts"`` stream, ``stream_index`` (of
+            :func:`~temporal_torchrl.envs.metaworld_env.layout_generator`), never the
+            training's or the evaluation's layouts.
 
     Returns:
         One TensorDict [T] per episode, in the layout ``env.rollout()`` gives (root keys at step
@@ -71,15 +76,16 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
             "also be None, for whole episodes)."
         )
     env = make_env(spec, seed, render=render, image_size=image_size, camera=camera,
-                   fast_render=fast_render, max_episode_steps=max_episode_steps)
+                   fast_render=fast_render, max_episode_steps=max_episode_steps, goal=goal,
+                   stream="experts", stream_index=stream_index)
     base_env = getattr(env, "base_env", env)
-    true_goal = base_env.goal_position
     rng = np.random.default_rng(seed if generator_seed is None else generator_seed)
     episodes = []
     try:
         for _ in range(num_episodes):
             expert = spec.make_expert()
             tensordict = env.reset()
+            true_goal = base_env.goal_position  # read after the reset that drew the layout
             steps, first_success = [], None
             for t in range(max_episode_steps):
                 observation = tensordict["observation"].numpy().astype(np.float64)
@@ -136,13 +142,14 @@ def collect_successful_experts(task: str, seed: int, count: int, *, render: bool
                                fast_render: bool = True,
                                max_episode_steps: int = EXPERT_MAX_STEPS,
                                steps_after_success: int | None = 5,
-                               max_attempts: int = 5) -> list[TensorDict]:
-    """``count`` successful scripted-expert episodes of the task's layout ``seed``.
+                               max_attempts: int = 5, goal: str = "fixed") -> list[TensorDict]:
+    """``count`` successful scripted-expert episodes of the task's layout ``seed`` (random
+    goals: of layouts from the seed's experts stream).
 
     Episodes are cut ``steps_after_success`` steps after their first success (None: whole
-    episodes). Noisy episodes that fail are replaced (new noise seeds), up to ``max_attempts``
-    rounds; frames are rendered when ``render`` (pass the training run's render settings),
-    nothing is embedded here.
+    episodes). Noisy episodes that fail are replaced (new noise seeds and, for random goals, new
+    layouts), up to ``max_attempts`` rounds; frames are rendered when ``render`` (pass the
+    training run's render settings), nothing is embedded here.
     """
     episodes: list[TensorDict] = []
     for attempt in range(max_attempts):
@@ -150,7 +157,8 @@ def collect_successful_experts(task: str, seed: int, count: int, *, render: bool
             task, seed, num_episodes=count - len(episodes), render=render,
             image_size=image_size, camera=camera, fast_render=fast_render,
             max_episode_steps=max_episode_steps, steps_after_success=steps_after_success,
-            generator_seed=None if attempt == 0 else seed + 1000 * attempt)
+            generator_seed=None if attempt == 0 else seed + 1000 * attempt, goal=goal,
+            stream_index=attempt)
         episodes += [episode for episode in batch if bool(episode["next", "success"].any())]
         if len(episodes) == count:
             return episodes

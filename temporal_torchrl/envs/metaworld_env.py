@@ -1,4 +1,4 @@
-"""Fixed-goal Metaworld tasks as TorchRL environments (thesis chapter 5: tasks and protocol).
+"""Metaworld tasks as TorchRL environments (thesis chapter 5: tasks and protocol).
 
 :func:`make_env` builds a :class:`MetaworldEnv`, a small :class:`~torchrl.envs.EnvBase` around
 Metaworld's goal-hidden (or goal-observable) task class, optionally followed by a
@@ -12,8 +12,15 @@ the output TensorDict directly, which keeps the TorchRL env close to the raw env
 
 Episode semantics (the prior implementations' protocol):
 
-- The layout (object and goal positions) is sampled once, in the constructor, from ``seed``, and
-  every reset restores it ("fixed goal"). Different seeds give different layouts.
+- ``goal="fixed"`` (the thesis's protocol): the layout (object and goal positions) is sampled
+  once, in the constructor, from ``seed``, and every reset restores it. Different seeds give
+  different layouts.
+- ``goal="random"`` (Metaworld's benchmark setting, FuRL's, the thesis's section 6 proposal):
+  every reset draws a new layout from a generator seeded by ``seed`` and ``stream`` (see
+  :func:`layout_generator`), so a run's sequence of layouts is reproducible and the training
+  workers, the scripted experts and the evaluation each draw their own. The goal is then
+  observable (``observation[36:39]``), as in Metaworld's and FuRL's random-goal tasks: a
+  state-based policy cannot otherwise know where the goal is.
 - Episodes last ``max_episode_steps`` (500) steps and end by truncation only: a success does
   not terminate the episode.
 - ``"success"`` (bool [1]) is Metaworld's per-step success flag ("currently within the
@@ -36,19 +43,44 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase, TransformedEnv
 
+from temporal_torchrl.defaults import GOALS
 from temporal_torchrl.envs.tasks import TaskSpec, get_task
 
 _OBSERVATION_DIM = 39
 _ACTION_DIM = 4
 
+#: The independent layout streams of one seed under random goals (``stream``).
+LAYOUT_STREAMS = ("training", "experts", "evaluation")
+
+
+def layout_generator(seed: int, stream: str = "training", index: int = 0) -> np.random.Generator:
+    """The generator a random-goal env draws its layouts from.
+
+    One seed has independent streams, so that training (``index``: the worker, each of
+    ``env.num_envs`` its own), the scripted experts (``index``: the collection round) and the
+    evaluation (held-out layouts) never share layouts by construction. Metaworld's own seeding
+    cannot give this: ``reset(seed=...)`` is ignored, and workers forked with ``seed=None`` draw
+    the same layouts.
+    """
+    if stream not in LAYOUT_STREAMS:
+        raise ValueError(f"stream={stream!r}; expected one of {LAYOUT_STREAMS}.")
+    sequence = np.random.SeedSequence(seed, spawn_key=(LAYOUT_STREAMS.index(stream), index))
+    return np.random.Generator(np.random.PCG64(sequence))
+
 
 class MetaworldEnv(EnvBase):
-    """One fixed-goal Metaworld task as a TorchRL environment (no rendering).
+    """One Metaworld task as a TorchRL environment (no rendering).
 
     Args:
         task: short task name (``"drawer-open"``) or a :class:`TaskSpec`.
-        seed: decides the layout; the same on every reset.
-        goal_observable: keep the goal position in ``observation[36:39]`` (hidden by default).
+        seed: decides the layout (fixed goal: the same on every reset) or the layouts' stream
+            (random goal).
+        goal: ``"fixed"`` (one layout, the thesis's protocol) or ``"random"`` (a new layout at
+            every reset).
+        stream, stream_index: random goals: which of the seed's layout streams the env draws
+            from (:func:`layout_generator`); ignored for fixed goals.
+        goal_observable: keep the goal position in ``observation[36:39]``; None (default):
+            hidden for fixed goals, observable for random goals.
         max_episode_steps: episode length; the last step is truncated.
         device: device of the output tensors.
 
@@ -62,9 +94,18 @@ class MetaworldEnv(EnvBase):
         torch.Size([10, 1])
     """
 
-    def __init__(self, task: str | TaskSpec, seed: int = 0, *, goal_observable: bool = False,
-                 max_episode_steps: int = 500, device: str | torch.device = "cpu") -> None:
+    def __init__(self, task: str | TaskSpec, seed: int = 0, *, goal: str = "fixed",
+                 stream: str = "training", stream_index: int = 0,
+                 goal_observable: bool | None = None, max_episode_steps: int = 500,
+                 device: str | torch.device = "cpu") -> None:
         spec = get_task(task)
+        if goal not in GOALS:
+            raise ValueError(
+                f"goal={goal!r} is not a goal setting: expected 'fixed' (one layout per run, the "
+                "thesis's protocol) or 'random' (a new layout at every reset)."
+            )
+        if stream not in LAYOUT_STREAMS:
+            raise ValueError(f"stream={stream!r}; expected one of {LAYOUT_STREAMS}.")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise ValueError(
                 f"seed={seed!r} is not an integer: the layout of a fixed-goal task is decided by "
@@ -79,15 +120,22 @@ class MetaworldEnv(EnvBase):
         super().__init__(device=device, batch_size=torch.Size([]))
         self.task = spec
         self.seed = int(seed)
-        self.goal_observable = goal_observable
+        self.goal, self.stream, self.stream_index = goal, stream, stream_index
+        self.goal_observable = goal == "random" if goal_observable is None else goal_observable
         self.max_episode_steps = max_episode_steps
-        if goal_observable:
+        if self.goal_observable:
             registry, suffix = ALL_V3_ENVIRONMENTS_GOAL_OBSERVABLE, "goal-observable"
         else:
             registry, suffix = ALL_V3_ENVIRONMENTS_GOAL_HIDDEN, "goal-hidden"
         # The constructor samples the layout from `seed` and freezes it for every reset;
         # `reset(seed=...)` would be ignored by Metaworld.
         self.metaworld_env = registry[f"{spec.env_id}-{suffix}"](seed=self.seed)
+        if goal == "random":
+            # Unfrozen, Metaworld draws each reset's layout from `np_random` (seeded_rand_vec;
+            # otherwise from the global numpy generator, shared by every env of the process).
+            self.metaworld_env._freeze_rand_vec = False
+            self.metaworld_env.seeded_rand_vec = True
+            self.restart_layouts()
         # An instance attribute shadows the class's 500 and moves the truncation step.
         self.metaworld_env.max_path_length = max_episode_steps
         self._make_specs()
@@ -104,8 +152,16 @@ class MetaworldEnv(EnvBase):
 
     @property
     def goal_position(self) -> np.ndarray:
-        """The true goal position of the fixed layout (also when it is hidden from the agent)."""
+        """The true goal position of the current layout (also when it is hidden from the
+        agent)."""
         return np.asarray(self.metaworld_env._target_pos, dtype=np.float64).copy()
+
+    def restart_layouts(self) -> None:
+        """Random goals: draw the next resets' layouts from the start of the env's stream again
+        (an evaluation meets the same held-out layouts each time); fixed goals: nothing to do."""
+        if self.goal == "random":
+            self.metaworld_env.np_random = layout_generator(self.seed, self.stream,
+                                                            self.stream_index)
 
     def _make_specs(self) -> None:
         # Metaworld's observation space says low == high == 0 on the goal dims even when the
@@ -172,8 +228,8 @@ class MetaworldEnv(EnvBase):
         return tensordict
 
     def _set_seed(self, seed: int | None) -> None:
-        # The layout is fixed by the constructor's seed (the fixed-goal protocol); a later seed
-        # only seeds the action spec's sampler used by `rand_step`.
+        # The layouts are decided by the constructor's seed and stream; a later seed only seeds
+        # the action spec's sampler used by `rand_step`.
         if seed is not None:
             torch.manual_seed(seed)
 
@@ -183,20 +239,26 @@ class MetaworldEnv(EnvBase):
 
 
 def make_env(task: str | TaskSpec, seed: int = 0, *, render: bool = False, image_size: int = 224,
-             camera: str = "corner2", fast_render: bool = True, goal_observable: bool = False,
-             max_episode_steps: int = 500, device: str | torch.device = "cpu") -> EnvBase:
-    """A fixed-goal Metaworld task as a TorchRL env, optionally rendering ``"pixels"``.
+             camera: str = "corner2", fast_render: bool = True, goal: str = "fixed",
+             stream: str = "training", stream_index: int = 0,
+             goal_observable: bool | None = None, max_episode_steps: int = 500,
+             device: str | torch.device = "cpu") -> EnvBase:
+    """A Metaworld task as a TorchRL env, optionally rendering ``"pixels"``.
 
     Args:
         task: short task name (see :data:`temporal_torchrl.envs.TASKS`).
-        seed: decides the layout, identical on every reset (different seeds, different layouts).
+        seed: decides the layout, identical on every reset (different seeds, different layouts);
+            with ``goal="random"``, the stream of layouts drawn at each reset.
+        goal, stream, stream_index: fixed or random goals, and the random goals' layout stream
+            (:class:`MetaworldEnv`).
         render: append a :class:`~temporal_torchrl.transforms.RenderTransform` writing
             ``"pixels"`` (uint8 [image_size, image_size, 3], upright) at reset and every step.
         image_size: side of the square frame in pixels.
         camera: Metaworld camera name (``"corner2"`` as in the prior implementations).
         fast_render: shadows, reflections and MSAA off (about 10x faster on CPU); ``False``
             renders with Metaworld's default look.
-        goal_observable: keep the goal in ``observation[36:39]`` (hidden by default).
+        goal_observable: keep the goal in ``observation[36:39]`` (None: hidden for fixed goals,
+            observable for random goals).
         max_episode_steps: episode length (500 in the protocol; shorter for tests).
         device: device of the output tensors.
 
@@ -217,8 +279,9 @@ def make_env(task: str | TaskSpec, seed: int = 0, *, render: bool = False, image
 
         # Built first so that a bad image size is refused before the simulator is built.
         transform = RenderTransform(camera=camera, image_size=image_size, fast=fast_render)
-    env = MetaworldEnv(task, seed, goal_observable=goal_observable,
-                       max_episode_steps=max_episode_steps, device=device)
+    env = MetaworldEnv(task, seed, goal=goal, stream=stream, stream_index=stream_index,
+                       goal_observable=goal_observable, max_episode_steps=max_episode_steps,
+                       device=device)
     if not render:
         return env
     transform.validate_camera(env.model)

@@ -29,14 +29,16 @@ from temporal_torchrl.transforms import (
 def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = None,
                       reward: TemporalReward | None = None, history: int | None = None,
                       image_size: int = 224, camera: str = "corner2", fast_render: bool = True,
-                      max_episode_steps: int = 500, num_envs: int = 1) -> EnvBase:
+                      max_episode_steps: int = 500, num_envs: int = 1,
+                      goal: str = "fixed") -> EnvBase:
     """``task``'s env -> (render) -> embedding -> history -> temporal reward.
 
     Frames are rendered only when ``encoder`` reads pixels; without an encoder the plain task
     env (sparse reward) is returned. The history transform keeps s_0 and s_{t-k}, ``k`` from
     ``reward`` (or ``history`` without one), and the window a d_sequence reward reads.
 
-    With ``num_envs`` > 1 the task (same layout) runs in that many worker processes
+    With ``num_envs`` > 1 the task (fixed goal: the same layout; random goal: each worker its
+    own layout stream, so no two workers share layouts) runs in that many worker processes
     (:class:`~torchrl.envs.ParallelEnv`, one torch thread and cores / N rasteriser threads
     each), each rendering its own frames;
     the embedding, history and reward transforms sit on the batched env, so one encoder forward
@@ -52,6 +54,8 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
             :func:`~temporal_torchrl.envs.make_env`.
         num_envs: copies of the task stepped in parallel (batch size ``[num_envs]``); 1: a
             single env with batch size ``[]``.
+        goal: ``"fixed"`` (one layout, the thesis) or ``"random"`` (a new layout at every reset,
+            from the seed's training stream; :class:`~temporal_torchrl.envs.MetaworldEnv`).
 
     Example:
         >>> from temporal_torchrl.encoders import load_encoder
@@ -70,15 +74,18 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     if render:
         encoder.check_frame_size(image_size)
     settings = {"render": render, "image_size": image_size, "camera": camera,
-                "fast_render": fast_render, "max_episode_steps": max_episode_steps}
+                "fast_render": fast_render, "max_episode_steps": max_episode_steps, "goal": goal}
     if num_envs == 1:
         env = make_env(task, seed, **settings)
     else:
         rasteriser_threads = max(1, (os.cpu_count() or 1) // num_envs)
         # The collector steps the workers and then updates, never both at once: this process
         # keeps its torch threads for the updates (ParallelEnv would give it cores - workers).
+        # One env function (a single task for TorchRL); each worker's own layout stream comes
+        # with its kwargs.
         env = ParallelEnv(num_envs, functools.partial(_worker_env, task, seed,
                                                       rasteriser_threads, **settings),
+                          create_env_kwargs=[{"stream_index": index} for index in range(num_envs)],
                           num_threads=torch.get_num_threads())
     if encoder is None:
         return env

@@ -20,11 +20,14 @@ from temporal_torchrl.runs.directory import RunDirectory
 from temporal_torchrl.runs.durable import write_json
 from temporal_torchrl.runs.episode_log import EpisodeLog
 from temporal_torchrl.runs.episode_store import EpisodeStore
+from temporal_torchrl.runs.evaluation_log import EvaluationLog, evaluation_summary
 from temporal_torchrl.runs.layout import (
     CHECKPOINT,
     CONFIG_FILE,
     EPISODE_COLUMNS,
     EPISODES_FILE,
+    EVALUATION_COLUMNS,
+    EVALUATION_FILE,
     LOCK,
     METRICS_FILE,
     POSITIVES_DIR,
@@ -64,6 +67,7 @@ __all__ = [
     "CheckpointFiles",
     "EpisodeLog",
     "EpisodeStore",
+    "EvaluationLog",
     "MetricsLog",
     "RunLock",
     "CHECKPOINT",
@@ -71,6 +75,8 @@ __all__ = [
     "DEVICE_KEYS",
     "EPISODES_FILE",
     "EPISODE_COLUMNS",
+    "EVALUATION_COLUMNS",
+    "EVALUATION_FILE",
     "LOCK",
     "METRICS_FILE",
     "POSITIVES_DIR",
@@ -87,6 +93,7 @@ __all__ = [
     "UnreadableRunFile",
     "check_positives_source",
     "default_run_dir",
+    "evaluation_summary",
     "find_runs",
     "flatten",
     "load_episode",

@@ -4,6 +4,8 @@ Layout::
 
     <run>/config.json               the resolved config the run started with
     <run>/episodes.csv              one row per finished episode (:data:`EPISODE_COLUMNS`)
+    <run>/eval.csv                  with eval.every: one row per evaluation of the deterministic
+                                    policy (:data:`EVALUATION_COLUMNS`)
     <run>/metrics.jsonl             one JSON object per logged point of training metrics (below)
     <run>/replay/NNNNNN.pt          the stored rows of every episode inserted into the buffer
     <run>/positives/EEEEEE.pt       with train.save_positives: the rows of each successful
@@ -33,8 +35,8 @@ Guarantees:
   appended and flushed the same way. A kill or a power cut leaves the old file or the new one.
 - **A fallback checkpoint.** The previous checkpoint is kept until the new one is on disk; a
   resume that finds the latest unreadable continues from the previous one and says so.
-- **Resume loses at most the episodes after the checkpoint.** ``episodes.csv``, ``replay/``,
-  ``positives/`` and ``metrics.jsonl`` are cut back to the checkpoint resumed from
+- **Resume loses at most the episodes after the checkpoint.** ``episodes.csv``, ``eval.csv``,
+  ``replay/``, ``positives/`` and ``metrics.jsonl`` are cut back to the checkpoint resumed from
   (:meth:`RunDirectory.resume_state`) and the replay episodes re-inserted in order, so the
   buffer is rebuilt as it was. An unreadable episode row or replay episode stops the resume
   with :class:`~temporal_torchrl.runs.UnreadableRunFile`, naming the file and the fix.
@@ -71,10 +73,12 @@ from temporal_torchrl.runs.checkpoint import Checkpoint, CheckpointFiles
 from temporal_torchrl.runs.durable import write_json
 from temporal_torchrl.runs.episode_log import EpisodeLog
 from temporal_torchrl.runs.episode_store import EpisodeStore
+from temporal_torchrl.runs.evaluation_log import EvaluationLog
 from temporal_torchrl.runs.layout import (
     CHECKPOINT,
     CONFIG_FILE,
     EPISODES_FILE,
+    EVALUATION_FILE,
     LOCK_FILES,
     METRICS_FILE,
     POSITIVES_DIR,
@@ -87,14 +91,15 @@ from temporal_torchrl.runs.metrics_log import MetricsLog
 
 class RunDirectory:
     """One training run's files (see the module doc): the lock (:class:`RunLock`), the
-    checkpoints (:class:`CheckpointFiles`), ``episodes.csv`` (:class:`EpisodeLog`),
-    ``metrics.jsonl`` (:class:`MetricsLog`), the stored episodes (:class:`EpisodeStore`), and
-    what ties them together: starting, replacing and resuming a run."""
+    checkpoints (:class:`CheckpointFiles`), ``episodes.csv`` (:class:`EpisodeLog`), ``eval.csv``
+    (:class:`EvaluationLog`), ``metrics.jsonl`` (:class:`MetricsLog`), the stored episodes
+    (:class:`EpisodeStore`), and what ties them together: starting, replacing and resuming a run."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self.checkpoints = CheckpointFiles(self.path)
         self.episodes = EpisodeLog(self.path / EPISODES_FILE)
+        self.evaluations = EvaluationLog(self.path / EVALUATION_FILE)
         self.metrics = MetricsLog(self.path / METRICS_FILE)
         self.replay = EpisodeStore(self.path / REPLAY_DIR)
         self.positives = EpisodeStore(self.path / POSITIVES_DIR)
@@ -191,10 +196,12 @@ class RunDirectory:
 
     def resume_state(self) -> Checkpoint:
         """The checkpoint to resume from (the latest readable one, :class:`CheckpointFiles`),
-        with ``episodes.csv``, ``metrics.jsonl``, ``replay/`` and ``positives/`` cut back to it:
-        the rows, points and episodes after it are dropped, as is a summary of a longer run."""
+        with ``episodes.csv``, ``eval.csv``, ``metrics.jsonl``, ``replay/`` and ``positives/``
+        cut back to it: the rows, points and episodes after it are dropped, as is a summary of a
+        longer run."""
         checkpoint = self.checkpoints.load(set_aside=True)
         self.episodes.truncate(checkpoint.episode)
+        self.evaluations.truncate(checkpoint.episode)
         self.positives.truncate(checkpoint.episode + 1)  # numbered by episode, from 1
         self.metrics.truncate(checkpoint.env_steps)
         self.replay.truncate(checkpoint.inserted)
@@ -219,6 +226,12 @@ class RunDirectory:
 
     def episode_rows(self) -> list[dict[str, str]]:
         return self.episodes.rows()
+
+    def append_evaluation(self, row: dict[str, Any]) -> None:
+        self.evaluations.append(row)
+
+    def evaluation_rows(self) -> list[dict[str, float]]:
+        return self.evaluations.rows()
 
     def truncate_episodes(self, episodes: int) -> None:
         self.episodes.truncate(episodes)

@@ -10,6 +10,8 @@ from typing import Any
 
 CONFIG_FILE = "config.json"
 EPISODES_FILE = "episodes.csv"
+#: Evaluations of the deterministic policy (``eval.every``).
+EVALUATION_FILE = "eval.csv"
 SUMMARY_FILE = "summary.json"
 CHECKPOINT = "checkpoint.pt"
 #: The checkpoint before the latest, kept until the new one is complete on disk.
@@ -28,6 +30,9 @@ REPLAY_DIR = "replay"
 POSITIVES_DIR = "positives"
 #: The columns of ``episodes.csv``.
 EPISODE_COLUMNS = ("episode", "env_steps", "success", "return", "mean_vlm_reward", "stage")
+#: The columns of ``eval.csv`` (:class:`~temporal_torchrl.runs.evaluation_log.EvaluationLog`).
+EVALUATION_COLUMNS = ("episode", "env_steps", "episodes", "success_rate", "final_success_rate",
+                      "return", "episode_length")
 
 
 def episode_file(index: int) -> str:

@@ -15,7 +15,8 @@ def default_run_dir(cfg: DictConfig) -> Path:
     """``runs/<task>/<encoder>_<positional>+<directional>_rho<r>_lambda<l>_<baseline>_<protocol>
     /seed<s>``: runs that differ in anything a preset or protocol sets (encoder, reward, rho,
     lambda, baseline, preloaded experts) or in the seed never share a directory (with
-    ``reward.certainty_scaling`` the directional part reads ``<directional>xcertainty``)."""
+    ``reward.certainty_scaling`` the directional part reads ``<directional>xcertainty``; with
+    ``env.goal=random`` the protocol part ends in ``_randomgoal``)."""
     if uses_vlm_reward(cfg):
         baseline = cfg.reward.baseline
         if baseline not in ("generic", "tailored"):
@@ -26,6 +27,8 @@ def default_run_dir(cfg: DictConfig) -> Path:
     else:
         method = "sac"
     protocol = protocol_name(cfg.train.preload_positives)
+    if cfg.env.get("goal", "fixed") == "random":
+        protocol += "_randomgoal"
     root = Path(cfg.runs_dir) if cfg.runs_dir is not None else Path("runs")
     return root / cfg.env.task / f"{method}_{protocol}" / f"seed{cfg.env.seed}"
 

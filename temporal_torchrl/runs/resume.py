@@ -111,7 +111,9 @@ def resumed_config(cfg: DictConfig, run_dir: Path,
 
 #: What a run giving its saved positives to another must share with it: the layout always, the
 #: frames and the encoder when the receiving run embeds them.
-_LAYOUT_KEYS = ("env.task", "env.seed")
+_LAYOUT_KEYS = ("env.task", "env.seed", "env.goal")
+#: What a key a source run's config.json lacks meant then (runs from before the key existed).
+_BEFORE_THE_KEY = {"env.goal": "fixed"}
 _FRAME_KEYS = ("env.image_size", "env.camera", "env.fast_render", "encoder.name",
                "encoder.checkpoint", "encoder.options")
 
@@ -127,12 +129,13 @@ def check_positives_source(cfg: DictConfig, source_config: dict[str, Any]) -> No
                          "without a VLM reward: its positives carry no embeddings. Take them "
                          "from a run with this run's encoder.")
     for key in keys:
-        theirs, ours = OmegaConf.select(source, key), OmegaConf.select(cfg, key)
+        theirs = OmegaConf.select(source, key, default=_BEFORE_THE_KEY.get(key))
+        ours = OmegaConf.select(cfg, key)
         if isinstance(theirs, DictConfig):
             theirs, ours = OmegaConf.to_container(theirs), OmegaConf.to_container(ours)
         if theirs != ours:
             raise ValueError(
                 f"config train.positives_from={cfg.train.positives_from!r} was trained with "
                 f"{key}={theirs!r}, this run has {key}={ours!r}: preloaded positives must come "
-                "from the same task, layout (env.seed), frames and encoder. Use a source run "
-                f"with {key}={ours!r}.")
+                "from the same task, layouts (env.seed, env.goal), frames and encoder. Use a "
+                f"source run with {key}={ours!r}.")

@@ -42,6 +42,7 @@ from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwo
 from temporal_torchrl.rewards import TemporalReward, reward_from_config
 from temporal_torchrl.runs import RunDirectory, check_positives_source
 from temporal_torchrl.runs.layout import LOGS_DIR
+from temporal_torchrl.training.evaluation import PolicyEvaluation
 from temporal_torchrl.training.logger import RunLogger
 from temporal_torchrl.training.relay import (
     NoRelay,
@@ -91,19 +92,20 @@ def make_environment(cfg: DictConfig, encoder: Encoder | None,
                              image_size=cfg.env.image_size, camera=cfg.env.camera,
                              fast_render=cfg.env.fast_render,
                              max_episode_steps=cfg.env.max_episode_steps,
-                             num_envs=cfg.env.num_envs)
+                             num_envs=cfg.env.num_envs, goal=cfg.env.goal)
 
 
 def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
                          count: int) -> list[TensorDict]:
-    """``count`` successful scripted-expert episodes with the run's task, layout and frames,
-    embedded by ``encoder`` (given the protocol's full 500 steps to succeed)."""
+    """``count`` successful scripted-expert episodes with the run's task, layout (random goals:
+    layouts of their own) and frames, embedded by ``encoder`` (given the protocol's full 500
+    steps to succeed)."""
     experts = collect_successful_experts(
         cfg.env.task, cfg.env.seed, count,
         render=encoder is not None and encoder.input_key == "pixels",
         image_size=cfg.env.image_size, camera=cfg.env.camera, fast_render=cfg.env.fast_render,
         max_episode_steps=max(cfg.env.max_episode_steps, EXPERT_MAX_STEPS),
-        steps_after_success=cfg.train.expert_steps_after_success)
+        steps_after_success=cfg.train.expert_steps_after_success, goal=cfg.env.goal)
     return [embed_episode(episode, encoder) if encoder is not None else episode
             for episode in experts]
 
@@ -116,7 +118,9 @@ def make_preloaded_positives(cfg: DictConfig, encoder: Encoder | None, finetune:
     ``train.preload_positives`` episodes: the first ones another run saved
     (``train.positives_from``, the release's route), or scripted-expert episodes of the run's
     layout and frames, whole unless ``train.expert_steps_after_success`` cuts them. s_g is the
-    first success state of the first of them (stage 1: of one scripted expert).
+    first success state of the first of them (stage 1: of one scripted expert). With random
+    goals, s_g is that of the first expert's layout, one image for every layout, as FuRL's code
+    takes its goal image from one oracle episode (``experiments/train_furl.py``).
     """
     dtype = getattr(torch, cfg.replay_buffer.embedding_dtype)
     count = cfg.train.preload_positives
@@ -316,6 +320,17 @@ def make_collector(cfg: DictConfig, env: EnvBase, actor: TensorDictModuleBase,
                      compile_policy=({"options": compile_options(cfg.compile.mode)}
                                      if cfg.compile.enabled else None),
                      auto_register_policy_transforms=False)
+
+
+def make_evaluation(cfg: DictConfig) -> PolicyEvaluation | None:
+    """The evaluation episodes ``eval.*`` asks for (None with ``eval.every=null``), on the
+    run's task, goal setting and episode length, the policy on ``train.device``."""
+    if cfg.eval.every is None:
+        return None
+    return PolicyEvaluation(cfg.env.task, cfg.env.seed, goal=cfg.env.goal,
+                            episodes=cfg.eval.episodes,
+                            max_episode_steps=cfg.env.max_episode_steps,
+                            device=resolve_device(cfg.train.device))
 
 
 def make_logger(cfg: DictConfig, run_dir: Path) -> RunLogger:
