@@ -14,6 +14,8 @@ from helpers import SEED0, SEED1, make_run
 from scipy import stats
 
 from temporal_torchrl.reports import group_runs
+from temporal_torchrl.reports.aggregate import INCOMPLETE, VALUE, Cell, RunValue
+from temporal_torchrl.reports.published import PublishedCell
 from temporal_torchrl.reports.reliable import build_reliable_table
 from temporal_torchrl.reports.tables import reliable_markdown
 from temporal_torchrl.reports.thesis_comparison import (
@@ -73,6 +75,25 @@ def test_an_interval_needs_a_seed_error():
         compare_with_thesis([50.0], 53.5)
     with pytest.raises(ValueError, match="no seed error"):
         compare_with_thesis([50.0, 50.0], 53.5)
+
+
+def test_a_cell_is_compared_when_one_side_has_a_seed_error():
+    """One rule for the report's comparisons and the thesis-table page: a complete cell of 2 or
+    more values, with our spread or a printed std."""
+    def cell(*values: float) -> Cell:
+        runs = tuple(RunValue(None, value, VALUE) for value in values)
+        std = float(np.std(values, ddof=1)) if len(values) > 1 else None
+        return Cell(runs, float(np.mean(values)), std)
+
+    printed, unprinted = PublishedCell(53.5, 9.0), PublishedCell(53.5)
+    assert cell(48.0, 32.0).comparable_with(unprinted)
+    assert cell(50.0, 50.0).comparable_with(printed)  # compare_with_thesis accepts it
+    compare_with_thesis([50.0, 50.0], printed.mean, printed.std)
+    assert not cell(50.0, 50.0).comparable_with(unprinted)  # no seed error on either side
+    assert not cell(50.0).comparable_with(printed)
+    pending = Cell((RunValue(None, 50.0, VALUE), RunValue(None, None, INCOMPLETE),
+                    RunValue(None, 40.0, VALUE)), 45.0, 7.1)
+    assert not pending.comparable_with(printed)
 
 
 def test_average_over_one_task_is_the_cells_comparison():

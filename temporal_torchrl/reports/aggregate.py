@@ -38,6 +38,7 @@ from temporal_torchrl.protocol_metrics import (
 from temporal_torchrl.reports.groups import RunGroup, order_tasks
 from temporal_torchrl.reports.published import (
     Configuration,
+    PublishedCell,
     PublishedResult,
     find_published,
 )
@@ -156,6 +157,14 @@ class Cell:
         """Every run has a value (the cell can be compared and averaged)."""
         return bool(self.runs) and not self.pending
 
+    def comparable_with(self, published: PublishedCell) -> bool:
+        """Whether the cell is compared with the thesis's ``published`` value
+        (:func:`~temporal_torchrl.reports.thesis_comparison.compare_with_thesis`): it is
+        complete, has 2 or more values, and one side at least has a seed error (our spread, or
+        the std the thesis prints). Runs that all have one value are compared with a printed
+        std; without one there is no seed error to compare with."""
+        return self.complete and len(self.values) >= 2 and bool(self.std or published.std)
+
 
 def make_cell(runs: Sequence[Run], metric: str, *, horizon: int = DEFAULT_HORIZON) -> Cell:
     """The cell of ``runs`` (one configuration, one task) for ``metric``."""
@@ -210,21 +219,18 @@ class MetricTable:
         return {label for label, mean in rounded.items() if mean == best}
 
     def thesis_comparisons(self) -> dict[tuple[str, str], ThesisComparison]:
-        """``(task, label) -> ThesisComparison`` for each complete cell of 2 or more runs that
-        the thesis reports, its table-wide interval over all of them; cells whose runs and the
-        thesis all have one value (no seed error) are left out."""
+        """``(task, label) -> ThesisComparison`` for each cell the thesis reports that is
+        comparable with it (:meth:`Cell.comparable_with`), its table-wide interval over all of
+        them."""
         compared = []
         for group in self.groups:
             result = self.published.get(group.label)
             for task in self.tasks:
                 cell = self.cells.get((task, group.label))
                 if result is None or cell is None or task not in result.cells \
-                        or not cell.complete or len(cell.values) < 2:
+                        or not cell.comparable_with(result.cells[task]):
                     continue
-                published = result.cells[task]
-                if cell.std == 0.0 and not published.std:
-                    continue
-                compared.append(((task, group.label), cell, published))
+                compared.append(((task, group.label), cell, result.cells[task]))
         return {key: compare_with_thesis(cell.values, published.mean, published.std,
                                          cells=len(compared))
                 for key, cell, published in compared}

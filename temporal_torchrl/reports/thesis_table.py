@@ -101,10 +101,6 @@ def find_table(number: str) -> PublishedTable:
     return tables[number]
 
 
-def _comparable(cell: Cell | None) -> bool:
-    return cell is not None and cell.complete and len(cell.values) > 1 and bool(cell.std)
-
-
 def build_thesis_table(groups: Sequence[RunGroup], number: str) -> ThesisTablePage:
     """The page of the thesis's table ``number`` for ``groups`` (module doc)."""
     table = find_table(number)
@@ -118,8 +114,13 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str) -> ThesisTablePa
     cells = {(task, column.key): make_cell(column.group.runs_for(task), table.metric)
              for column in columns if column.group is not None
              for task in table.rows if task in column.group.tasks}
-    compared = [key for key, cell in cells.items() if _comparable(cell)]
     by_key = {column.key: column for column in columns}
+
+    def comparable(task: str, column: ThesisColumn) -> bool:
+        cell = cells.get((task, column.key))
+        return cell is not None and cell.comparable_with(table.rows[task][column.index])
+
+    compared = [(task, key) for task, key in cells if comparable(task, by_key[key])]
     comparisons = {}
     for task, key in compared:
         published = table.rows[task][by_key[key].index]
@@ -127,7 +128,7 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str) -> ThesisTablePa
             cells[task, key].values, published.mean, published.std, cells=len(compared))
     averaged = {}
     for column in columns:
-        tasks = tuple(task for task in table.rows if _comparable(cells.get((task, column.key))))
+        tasks = tuple(task for task in table.rows if comparable(task, column))
         if tasks:
             averaged[column.key] = (column, tasks)
     # An average over one task is that task's cell, compared above already.
