@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import sac_temporal
 import torch
-from helpers import config, episode_csv_rows
+from helpers import RECIPES, config, episode_csv_rows
+from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from tensordict.nn import NormalParamExtractor, TensorDictModule
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
@@ -191,3 +192,16 @@ def test_positives_of_a_fixed_layout_are_refused_for_random_goals(tmp_path):
                                          r"env\.goal='random'.*layouts \(env\.seed, env\.goal\)"):
         sac_temporal.train(config(tmp_path, "env.goal=random", "train.preload_positives=1",
                                   f"train.positives_from={tmp_path / 'source' / 'run'}"))
+
+
+def test_the_furl_paper_protocol_is_furls_code(tmp_path):
+    """fuyw/FuRL@6316e6c: max_timesteps 1e6, start_timesteps 1e4, eval_freq 1e5 env steps, 10
+    eval episodes on random goals, l2_margin 0.25, rho 0.05 (preset=furl), no preload."""
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        cfg = validate_recipe_config(compose("config", overrides=["preset=furl",
+                                                                  "protocol=furl_paper"]))
+    steps = cfg.env.max_episode_steps
+    assert (cfg.env.goal, cfg.train.preload_positives) == ("random", 0)
+    assert cfg.train.episodes * steps == 1_000_000 and cfg.train.random_steps == 10_000
+    assert (cfg.eval.every * steps, cfg.eval.episodes) == (100_000, 10)
+    assert (cfg.reward.l2_margin, cfg.reward.rho) == (0.25, 0.05)
