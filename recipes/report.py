@@ -29,6 +29,12 @@ and writes into ``--out``:
   ``report.md`` leads with it;
 - ``runs.csv``: every run with its episodes and metrics (or why it has none yet);
 - ``success_curves.png``: running-average success (window 150) per task and configuration;
+- ``evaluation.md``/``.csv`` and ``evaluation_curves.png``, only when some runs evaluated their
+  deterministic policy (``eval.every``; their ``eval.csv``): per task and configuration the
+  final evaluation success (the last evaluation's success rate) beside RAS, its IQM and mean
+  over tasks and seeds with 95% stratified-bootstrap CIs (rliable), and the evaluations'
+  success rate against env steps, mean over seeds with a 95% t-interval band
+  (:mod:`temporal_torchrl.reports.evaluation`);
 - ``metric_<key>.png`` for each ``--metrics`` key (from the runs' ``metrics.jsonl``; older runs:
   their CSV logs);
 - ``reward_curves.png`` with ``--figure-run``: r_P and r_D along a positive and a negative
@@ -52,10 +58,17 @@ from temporal_torchrl.reports import (
     logged_scalars,
     reward_curves,
 )
+from temporal_torchrl.reports.evaluation import (
+    EVALUATION_TABLE_COLUMNS,
+    build_evaluation_table,
+    evaluation_markdown,
+    evaluation_rows,
+)
 from temporal_torchrl.reports.groups import configuration_name, configuration_settings
 from temporal_torchrl.reports.plots import (
     configuration_colours,
     plot_aggregate_intervals,
+    plot_evaluation_curves,
     plot_improvement,
     plot_logged_metric,
     plot_performance_profiles,
@@ -209,8 +222,9 @@ def main(argv: list[str] | None = None) -> None:
         sections.insert(4, markdown)  # the report leads with it, before how to read it
         print(markdown)
 
+    tables = {}
     for metric in METRICS:
-        table = build_table(groups, metric)
+        table = tables[metric] = build_table(groups, metric)
         markdown = table_markdown(table)
         (args.out / f"{metric}.md").write_text(markdown)
         write_csv(args.out / f"{metric}.csv", table_rows(table), CSV_COLUMNS)
@@ -229,6 +243,18 @@ def main(argv: list[str] | None = None) -> None:
     sections.append(aggregates)
     print(aggregates)
 
+    # Only runs that evaluated (eval.csv) make this section: without any, nothing is said.
+    evaluation = build_evaluation_table(groups, ras=tables["ras"],
+                                        ras_reliable=reliable[list(METRICS).index("ras")],
+                                        reps=args.bootstrap, seed=args.seed)
+    if evaluation is not None:
+        markdown = evaluation_markdown(evaluation)
+        (args.out / "evaluation.md").write_text(markdown)
+        write_csv(args.out / "evaluation.csv", evaluation_rows(evaluation),
+                  EVALUATION_TABLE_COLUMNS)
+        sections.append(markdown)
+        print(markdown)
+
     figures = ["## Figures"]
     colours = configuration_colours(labels)
     for table in reliable:
@@ -243,6 +269,10 @@ def main(argv: list[str] | None = None) -> None:
                    "(probability_of_improvement.png)")
     plot_success_curves(groups, args.out / "success_curves.png")
     figures.append("![running-average success](success_curves.png)")
+    if evaluation is not None:
+        plot_evaluation_curves(groups, args.out / "evaluation_curves.png")
+        figures.append("![evaluation success rate against env steps: mean over seeds, 95% "
+                       "t-interval band](evaluation_curves.png)")
     for key in args.metrics:
         name = metric_file(key)
         plot_logged_metric(groups, scalars, key, args.out / name)

@@ -13,6 +13,9 @@
   its seed error counted: the difference's interval and what it lets us say.
 - :mod:`~temporal_torchrl.reports.thesis_table`: the runs laid out as one of the thesis's tables,
   ours beside it in every cell (``report.py --thesis-table``).
+- :mod:`~temporal_torchrl.reports.evaluation`: the runs' periodic evaluations of the
+  deterministic policy (``eval.csv``): final evaluation success per task and, with rliable, over
+  tasks and seeds, beside RAS.
 - :mod:`~temporal_torchrl.reports.tables`: Markdown and CSV output.
 - :mod:`~temporal_torchrl.reports.logs`: logged training metrics (the run's metrics.jsonl).
 - :mod:`~temporal_torchrl.reports.reward_curves`: r_P and r_D along stored episodes with a

@@ -4,6 +4,8 @@
   5.4-5.11), one panel per task, one line per configuration, mean and a ±std band over seeds.
 - :func:`plot_logged_metric`: one logged training metric (``sac/loss_qvalue``, ...) the same way,
   against env steps.
+- :func:`plot_evaluation_curves`: the success rate of the deterministic policy's evaluations
+  (``eval.csv``) against training env steps, the same way, with a 95% t-interval over seeds.
 - :func:`plot_reward_curves`: r_P and r_D along a positive and a negative episode (Figure 5.12).
 - :func:`plot_aggregate_intervals`, :func:`plot_performance_profiles`,
   :func:`plot_improvement`: the rliable aggregates of
@@ -30,6 +32,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from rliable import plot_utils
+from scipy import stats
 
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.protocol_metrics import DEFAULT_WINDOW
@@ -53,19 +56,43 @@ def running_average(successes: Sequence[bool], window: int = DEFAULT_WINDOW) -> 
     return 100.0 * (totals - lagged) / counts
 
 
-def draw_mean_band(axes: Axes, curves: Sequence[Series], label: str, colour: str) -> None:
-    """Mean ± std of ``curves`` on the steps all of them cover (interpolated onto their union
-    there), and each curve alone beyond, thin."""
+#: A band around the mean over seeds: ``(values [seeds, steps], mean) -> (low, high)``.
+Band = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def std_band(values: np.ndarray, mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean ± sample std over seeds."""
+    std = values.std(axis=0, ddof=1)
+    return mean - std, mean + std
+
+
+def t_interval_band(level: float = 0.95, bounds: tuple[float, float] | None = None) -> Band:
+    """The ``level`` t-interval of the mean over seeds, mean ± t_(n-1) s / sqrt(n), clipped to
+    ``bounds`` when given (a rate's range)."""
+    def band(values: np.ndarray, mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        seeds = values.shape[0]
+        half = (stats.t.ppf(0.5 + level / 2, seeds - 1) * values.std(axis=0, ddof=1)
+                / np.sqrt(seeds))
+        low, high = mean - half, mean + half
+        return (low, high) if bounds is None else (np.clip(low, *bounds), np.clip(high, *bounds))
+    return band
+
+
+def draw_mean_band(axes: Axes, curves: Sequence[Series], label: str, colour: str,
+                   band: Band = std_band, **style) -> None:
+    """Mean of ``curves`` and a ``band`` around it (default ± std) on the steps all of them
+    cover (interpolated onto their union there), and each curve alone beyond, thin; ``style``
+    goes to the mean's line."""
     start = max(curve.steps[0] for curve in curves)
     stop = min(curve.steps[-1] for curve in curves)
     grid = np.unique(np.concatenate([curve.steps for curve in curves]))
     grid = grid[(grid >= start) & (grid <= stop)]
     values = np.stack([np.interp(grid, curve.steps, curve.values) for curve in curves])
     mean = values.mean(axis=0)
-    axes.plot(grid, mean, color=colour, label=f"{label} (n={len(curves)})")
+    axes.plot(grid, mean, color=colour, label=f"{label} (n={len(curves)})", **style)
     if len(curves) > 1:
-        std = values.std(axis=0, ddof=1)
-        axes.fill_between(grid, mean - std, mean + std, color=colour, alpha=0.2, linewidth=0)
+        low, high = band(values, mean)
+        axes.fill_between(grid, low, high, color=colour, alpha=0.2, linewidth=0)
     for curve in curves:
         beyond = curve.steps >= stop
         if beyond.sum() > 1:
@@ -86,7 +113,8 @@ def _task_panels(tasks: Sequence[str], title: str) -> tuple[Figure, dict[str, Ax
 
 def _plot_groups(groups: Sequence[RunGroup], path: Path, title: str, ylabel: str, xlabel: str,
                  curve_of: Callable[[Run], Series | None],
-                 decorate: Callable[[Axes, str], None] | None = None) -> None:
+                 decorate: Callable[[Axes, str], None] | None = None,
+                 band: Band = std_band, **style) -> None:
     """One panel per task, one mean-band line per group (groups without data left out)."""
     tasks = order_tasks(run.task for group in groups for run in group.runs)
     figure, panels = _task_panels(tasks, title)
@@ -96,7 +124,8 @@ def _plot_groups(groups: Sequence[RunGroup], path: Path, title: str, ylabel: str
             curves = [curve for curve in map(curve_of, group.runs_for(task))
                       if curve is not None and curve.steps.size]
             if curves:
-                draw_mean_band(panels[task], curves, group.label, colours[number % len(colours)])
+                draw_mean_band(panels[task], curves, group.label, colours[number % len(colours)],
+                               band, **style)
     for task, axes in panels.items():
         axes.set_title(task)
         axes.set_xlabel(xlabel)
@@ -132,6 +161,34 @@ def plot_logged_metric(groups: Sequence[RunGroup], scalars: Mapping[Path, Mappin
     that did not log it are left out)."""
     _plot_groups(groups, path, key, key, "env steps",
                         lambda run: scalars.get(run.path, {}).get(key))
+
+
+def plot_evaluation_curves(groups: Sequence[RunGroup], path: Path, level: float = 0.95) -> None:
+    """The evaluations' success rate (%, success at any step of an evaluation episode) against
+    the training env steps when taken, per task and configuration: the mean over seeds (markers
+    where a seed was evaluated) and its ``level`` t-interval over seeds, clipped to [0, 100].
+
+    Only the runs that evaluated are drawn, and only their tasks get a panel; each group keeps
+    its colour of :func:`plot_success_curves`.
+    """
+    evaluated = [RunGroup(group.label, group.settings,
+                          tuple(run for run in group.runs if run.evaluations))
+                 for group in groups]
+    if not any(group.runs for group in evaluated):
+        raise ValueError("no run has evaluations (eval.csv): nothing to plot.")
+
+    def curve(run: Run) -> Series:
+        return Series(np.array([row["env_steps"] for row in run.evaluations], dtype=float),
+                      np.array([100.0 * row["success_rate"] for row in run.evaluations]))
+
+    def limits(axes: Axes, task: str) -> None:
+        axes.set_ylim(-2, 102)
+
+    percent = f"{100 * level:g}%"
+    _plot_groups(evaluated, path, "Evaluation success rate of the deterministic policy\n(line: "
+                 f"mean over seeds; band: {percent} t-interval over seeds)", "success rate (%)",
+                 "training env steps", curve, limits, t_interval_band(level, (0.0, 100.0)),
+                 marker="o", markersize=3)
 
 
 def plot_reward_curves(positive: EpisodeRewards, negative: EpisodeRewards, path: Path,

@@ -1,7 +1,8 @@
 """Reading runs back: what the reports need of a run directory, read through the run package.
 
-:func:`find_runs` and :func:`load_run` read a run's config, its episodes' successes and its
-summary (a run still running or killed has no summary); :func:`load_reward` and
+:func:`find_runs` and :func:`load_run` read a run's config, its episodes' successes, its
+evaluations of the deterministic policy (``eval.csv``, when it evaluated) and its summary (a run
+still running or killed has no summary); :func:`load_reward` and
 :func:`load_episode` read its saved reward heads and its stored episodes.
 """
 
@@ -20,7 +21,14 @@ from temporal_torchrl.rewards.config import reward_from_config
 from temporal_torchrl.runs.checkpoint import Checkpoint
 from temporal_torchrl.runs.directory import RunDirectory
 from temporal_torchrl.runs.episode_log import EpisodeLog
-from temporal_torchrl.runs.layout import CHECKPOINT, CONFIG_FILE, EPISODES_FILE, SUMMARY_FILE
+from temporal_torchrl.runs.evaluation_log import EvaluationLog
+from temporal_torchrl.runs.layout import (
+    CHECKPOINT,
+    CONFIG_FILE,
+    EPISODES_FILE,
+    EVALUATION_FILE,
+    SUMMARY_FILE,
+)
 
 #: Keys that tell the runs of one configuration apart (and put them in different table rows).
 RUN_KEYS = ("env.seed", "env.task")
@@ -37,12 +45,17 @@ class Run:
         summary: its ``summary.json``, or None while it runs or after it was killed. A run
             extended with ``resume=true train.episodes=...`` keeps its old summary while it runs
             on, so :attr:`finished` also checks the summary's episode count.
+        evaluations: the rows of its ``eval.csv``
+            (:class:`~temporal_torchrl.runs.evaluation_log.EvaluationLog`, columns
+            :data:`~temporal_torchrl.runs.layout.EVALUATION_COLUMNS` as numbers), in the order
+            taken; empty when the run did not evaluate (``eval.every`` unset) or has not yet.
     """
 
     path: Path
     config: dict[str, Any]
     successes: tuple[bool, ...]
     summary: dict[str, Any] | None
+    evaluations: tuple[dict[str, float], ...] = ()
 
     @property
     def task(self) -> str:
@@ -80,7 +93,8 @@ def read_successes(path: Path) -> tuple[bool, ...]:
 
 
 def load_run(path: str | Path) -> Run:
-    """Read one run directory (``config.json``, ``episodes.csv``, ``summary.json`` if any)."""
+    """Read one run directory (``config.json``, ``episodes.csv``, ``eval.csv`` and
+    ``summary.json`` if any)."""
     path = Path(path)
     config_path = path / CONFIG_FILE
     if not config_path.is_file():
@@ -88,7 +102,8 @@ def load_run(path: str | Path) -> Run:
     config = json.loads(config_path.read_text())
     summary_path = path / SUMMARY_FILE
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else None
-    run = Run(path, config, read_successes(path / EPISODES_FILE), summary)
+    run = Run(path, config, read_successes(path / EPISODES_FILE), summary,
+              tuple(EvaluationLog(path / EVALUATION_FILE).rows()))
     for key in RUN_KEYS:
         run.setting(key)  # fail here, naming the file, rather than while grouping
     return run
