@@ -148,7 +148,8 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
                        **{key: cfg.reward[key] for key in (
                            "batch_size", "lr", "delta", "l2_margin", "gap", "same_position",
                            "label_window", "k", "alpha", "projection", "window",
-                           "certainty_bandwidth", "certainty_prior")}},
+                           "certainty_bandwidth", "certainty_prior")},
+                       "options": OmegaConf.to_container(cfg.reward.options, resolve=True)},
         "run": {"command": command, "machine": machine_description(),
                 "seconds": time.perf_counter() - start, "dataset_seconds": dataset_seconds,
                 "scoring_seconds": time.perf_counter() - start - dataset_seconds},

@@ -124,3 +124,39 @@ def test_an_older_run_resumes_with_the_current_defaults_for_its_missing_keys(tmp
     (tmp_path / "config.json").write_text(json.dumps(saved))
     with pytest.raises(ValueError, match=r"config reward\.k=0 is invalid"):
         validate_recipe_config(resumed_config(current, tmp_path, given_keys={"resume"}))
+
+
+@pytest.fixture
+def example_reward_module():
+    """examples/my_directional_reward.py, which registers d_sharp; unregistered afterwards."""
+    import sys
+
+    from temporal_torchrl.rewards import DIRECTIONAL, unregister_reward
+    loaded = set(sys.modules)
+    yield RECIPES.parent / "examples" / "my_directional_reward.py"
+    if "d_sharp" in DIRECTIONAL:
+        unregister_reward("d_sharp")
+    for name in set(sys.modules) - loaded:
+        if name.startswith("reward_module_"):
+            del sys.modules[name]
+
+
+def test_reward_options_are_those_the_configured_rewards_declare(example_reward_module):
+    with pytest.raises(ValueError, match=r"config reward\.options\.sharpness=4 is invalid: "
+                                         r"expected an option of furl or d3: they declare none"):
+        validate_recipe_config(composed("config", "+reward.options.sharpness=4"))
+    own = [f"reward.modules=[{example_reward_module}]", "reward.directional=d_sharp"]
+    cfg = validate_recipe_config(composed("config", *own, "+reward.options.sharpness=4"))
+    assert OmegaConf.to_container(cfg.reward.options) == {"sharpness": 4}
+    with pytest.raises(ValueError, match=r"config reward\.options\.margin='wide' is invalid: "
+                                         r"expected a float like d_sharp's default 0\.1"):
+        validate_recipe_config(composed("config", *own, "+reward.options.margin=wide"))
+    # The offline benchmark: an option of any listed variant (each variant gets its own only).
+    listed = [f"reward.modules=[{example_reward_module}]", "reward.positional=none",
+              "reward.directional=[d3,d_sharp]"]
+    validate_reward_quality_config(composed("evaluate_rewards", *listed,
+                                            "+reward.options.margin=0.3"))
+    with pytest.raises(ValueError, match=r"reward\.options\.temperature=1 is invalid: expected "
+                                         r"an option of d3 or d_sharp: sharpness, margin"):
+        validate_reward_quality_config(composed("evaluate_rewards", *listed,
+                                                "+reward.options.temperature=1"))

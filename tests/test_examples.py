@@ -7,9 +7,18 @@ from pathlib import Path
 
 import pytest
 import sac_temporal
+import torch
 from hydra import compose, initialize_config_dir
+from tensordict import TensorDict
 
-from temporal_torchrl.rewards import POSITIONAL, unregister_reward
+from temporal_torchrl.objectives import finetuning_losses
+from temporal_torchrl.rewards import (
+    DIRECTIONAL,
+    POSITIONAL,
+    TemporalReward,
+    reward_from_config,
+    unregister_reward,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -36,6 +45,19 @@ def no_p5():
     yield
     if "p5" in POSITIONAL:
         unregister_reward("p5")
+    for name in set(sys.modules) - loaded:
+        if name.startswith("reward_module_"):
+            del sys.modules[name]
+
+
+@pytest.fixture
+def d_sharp():
+    """examples/my_directional_reward.py registers "d_sharp": its module (the recipe's import of
+    the file), and the registry left as it was found."""
+    loaded = set(sys.modules)
+    yield
+    if "d_sharp" in DIRECTIONAL:
+        unregister_reward("d_sharp")
     for name in set(sys.modules) - loaded:
         if name.startswith("reward_module_"):
             del sys.modules[name]
@@ -73,3 +95,61 @@ def test_own_reward_in_the_recipe(tmp_path, no_p5):
 def test_own_encoder(capsys):
     example_main("own_encoder.py")(["--steps", "5"])
     assert "bag_of_words_state: embedding (5, 64)" in capsys.readouterr().out
+
+
+def test_own_directional_reward_with_its_options_in_the_recipe(tmp_path, d_sharp):
+    """The extending guide's command: ``reward.modules=[examples/my_directional_reward.py]
+    reward.directional=d_sharp +reward.options.sharpness=4 +reward.options.margin=0.2``."""
+    with initialize_config_dir(config_dir=str(ROOT / "recipes"), version_base=None):
+        cfg = compose("config", overrides=[
+            *TINY_RUN, f"reward.modules=[{EXAMPLES / 'my_directional_reward.py'}]",
+            "reward.directional=d_sharp", "+reward.options.sharpness=4",
+            "+reward.options.margin=0.2", f"output_dir={tmp_path / 'run'}"])
+    summary = sac_temporal.train(cfg)
+    assert summary["episodes"] == 3
+    saved = summary["config"]["reward"]
+    assert saved["directional"] == "d_sharp"
+    assert saved["options"] == {"sharpness": 4, "margin": 0.2}
+    # The run's saved config rebuilds the reward with its options, finetuned by its own loss.
+    reward = reward_from_config(summary["config"], torch.randn(16), torch.randn(16))
+    assert reward.options == {"sharpness": 4.0, "margin": 0.2}
+    losses = finetuning_losses(reward, torch.randn(16), stage=1)
+    assert [type(loss).__name__ for loss in losses] == ["PositionalRankingLoss",
+                                                        "MarginDirectionalLoss"]
+
+
+def test_own_loss_of_the_directional_example_by_hand(d_sharp):
+    """d_sharp's MarginDirectionalLoss on a stage-2 batch: the hinge of each group, written
+    out with the reward function and the options the reward was given."""
+    namespace = runpy.run_path(str(EXAMPLES / "my_directional_reward.py"))
+    gen = torch.Generator().manual_seed(3)
+    dim, count = 6, 5
+    reward = TemporalReward(dim, torch.randn(dim, generator=gen), torch.randn(dim, generator=gen),
+                            positional=None, directional="d_sharp",
+                            options={"sharpness": 3, "margin": 0.25})
+    goal = torch.randn(dim, generator=gen)
+    loss, = finetuning_losses(reward, goal, stage=2)
+    assert isinstance(loss, namespace["MarginDirectionalLoss"])
+
+    def states() -> TensorDict:
+        s_t, s_tk, s_0 = (torch.randn(count, dim, generator=gen) for _ in range(3))
+        return TensorDict({"embedding": s_t, "previous_embedding": s_tk,
+                           "initial_embedding": s_0}, [count])
+
+    negative, positive = states(), states()
+    heads, g, b = reward.directional_heads, reward.goal_embedding, reward.baseline_embedding
+
+    def r(s, s_prev, position):
+        return namespace["sharpened_d3"](heads, s, s_prev=s_prev, g=g, b=b, sharpness=3.0,
+                                         position=position)
+
+    n_t, n_tk = negative["embedding"], negative["previous_embedding"]
+    expected_negative = torch.relu(0.25 + r(n_t, n_tk, None)
+                                   - r(goal.expand_as(n_t), n_t, n_t)).mean()
+    p_t, p_tk = positive["embedding"], positive["previous_embedding"]
+    expected_positive = torch.relu(0.25 + r(p_tk, p_t, p_t) - r(p_t, p_tk, None)).mean()
+    out = loss(TensorDict({"negative": negative, "positive": positive}, [count]))
+    assert out["loss_negative"].item() == pytest.approx(expected_negative.item(), abs=1e-6)
+    assert out["loss_positive"].item() == pytest.approx(expected_positive.item(), abs=1e-6)
+    out["loss_directional"].backward()
+    assert all(parameter.grad is not None for parameter in loss.parameters())

@@ -10,6 +10,7 @@ from temporal_torchrl.rewards import (
     IMAGE_INPUTS,
     OBJECTIVES,
     POSITIONAL,
+    REWARDS,
     RewardHeads,
     SequenceEncoder,
     TemporalReward,
@@ -775,3 +776,112 @@ def test_objectives_are_registered_and_checked(registry):
         register_reward("p6", toy_positional, kind="positional", image_input="window")
     with pytest.raises(ValueError, match="Unknown reward variant 'd9'"):
         objective_of("d9")
+
+
+def scaled_positional(heads, s, *, g, scale, **unused):
+    """A positional reward with an option of its own."""
+    return scale * cosine_similarity(heads.image(s), heads.text(g))
+
+
+def test_a_reward_declares_its_options_and_receives_their_values(registry, embeddings):
+    s, s0, s_prev, _, _, _ = embeddings
+    registry("p6", scaled_positional, kind="positional", options={"scale": 2.0, "tag": None})
+    registry("d6", toy_directional, kind="directional", image_input="concatenated",
+             options={"scale": 1.0, "steps": 3, "clipped": False})
+    assert dict(REWARDS["p6"].options) == {"scale": 2.0, "tag": None}
+    success = torch.zeros(BATCH, 1, dtype=torch.bool)
+    default = _temporal(positional="p6", directional=None)
+    assert default.options == {"scale": 2.0, "tag": None}
+    expected = 2.0 * cosine_similarity(default.positional_heads.image(s),
+                                       default.positional_heads.text(default.goal_embedding))
+    torch.testing.assert_close(default(s, s0, s_prev, success)["positional_reward"].squeeze(-1),
+                               expected)
+    # An int is taken for a float; an option both parts declare goes to both.
+    given = _temporal(positional="p6", directional="d6", options={"scale": 3, "steps": 5})
+    assert given.options == {"scale": 3.0, "tag": None, "steps": 5, "clipped": False}
+    assert given.part_options("p6") == {"scale": 3.0, "tag": None}
+    assert given.part_options("d3") == {}  # a built-in declares none
+    assert "options={'scale': 3.0" in repr(given)
+    halved = _temporal(positional="p6", directional="d6", options={"scale": 2})
+    halved.load_state_dict(given.state_dict())
+    torch.testing.assert_close(given.positional_reward(s), 1.5 * halved.positional_reward(s))
+    with pytest.raises(ValueError, match=r"options 'scales': not an option of p6 or d6; their "
+                                         r"options: scale, tag, steps, clipped"):
+        _temporal(positional="p6", directional="d6", options={"scales": 3.0})
+    with pytest.raises(ValueError, match="not an option of furl or d3; their options: none"):
+        _temporal(options={"scale": 3.0})
+    for bad, expected_type in (({"steps": 2.5}, "int"), ({"clipped": 1}, "bool"),
+                               ({"scale": "big"}, "float")):
+        with pytest.raises(ValueError, match=f"expected a {expected_type} like its default"):
+            _temporal(positional="p6", directional="d6", options=bad)
+
+
+def test_options_are_checked_when_registered(registry):
+    with pytest.raises(ValueError, match="option 'alpha' is one of the keywords"):
+        register_reward("p6", scaled_positional, kind="positional", options={"alpha": 0.5})
+    with pytest.raises(ValueError, match="option name 'two words'"):
+        register_reward("p6", scaled_positional, kind="positional", options={"two words": 1})
+    with pytest.raises(ValueError, match=r"option scale=\[1, 2\]; a default is a bool"):
+        register_reward("p6", scaled_positional, kind="positional", options={"scale": [1, 2]})
+    with pytest.raises(ValueError, match="options=3; expected a dict"):
+        register_reward("p6", scaled_positional, kind="positional", options=3)
+    # The function must take its options (here scale, as a keyword without **unused).
+    with pytest.raises(ValueError, match="cannot be called the way rewards are"):
+        register_reward("p6", lambda heads, s, *, g, b, s0, s_prev, alpha, projection, position,
+                        window: s.sum(-1), kind="positional", options={"scale": 1.0})
+    assert "p6" not in REWARDS
+
+
+def test_a_reward_brings_its_own_loss(registry):
+    from temporal_torchrl.objectives import (
+        OBJECTIVE_LOSSES,
+        DirectionalLoss,
+        finetuning_losses,
+        loss_class,
+    )
+
+    class TwiceTheDirectionalLoss(DirectionalLoss):
+        def forward(self, tensordict):
+            out = super().forward(tensordict)
+            out[self.loss_key] = 2 * out[self.loss_key]
+            return out
+
+    registry("d6", toy_directional, kind="directional", image_input="concatenated",
+             loss=TwiceTheDirectionalLoss)
+    assert objective_of("d6") == "TwiceTheDirectionalLoss"
+    assert loss_class("d6") is TwiceTheDirectionalLoss
+    assert {name: loss_class(name) for name in ("furl", "d3", "d_certainty")} == {
+        "furl": OBJECTIVE_LOSSES["ranking"], "d3": OBJECTIVE_LOSSES["directional"],
+        "d_certainty": OBJECTIVE_LOSSES["certainty"]}
+    reward = _temporal(positional="furl", directional="d6")
+    ranking, directional = finetuning_losses(reward, torch.randn(D), stage=1, delta=0.3,
+                                             same_position=False)
+    assert ranking.delta == 0.3 and type(directional) is TwiceTheDirectionalLoss
+    assert directional.same_position is False  # the settings its __init__ takes
+    with pytest.raises(ValueError, match="zero-shot reward"):
+        register_reward("p6", toy_positional, kind="positional", image_input=None,
+                        loss=TwiceTheDirectionalLoss)
+    with pytest.raises(ValueError, match="expected a subclass of "
+                                         "temporal_torchrl.objectives.FinetuningLoss"):
+        register_reward("d7", toy_directional, kind="directional", image_input="concatenated",
+                        loss=torch.nn.MSELoss)
+
+
+def test_reward_options_from_a_config(registry):
+    from omegaconf import OmegaConf
+
+    from temporal_torchrl.configs import RecipeConfig
+    from temporal_torchrl.rewards import reward_options
+
+    registry("p6", scaled_positional, kind="positional", options={"scale": 2.0})
+    registry("d6", toy_directional, kind="directional", image_input="concatenated",
+             options={"steps": 3})
+    config = OmegaConf.to_container(OmegaConf.structured(RecipeConfig))
+    config["reward"].update(positional="p6", directional="d6", options={"scale": 3, "steps": 4})
+    assert reward_options(config)["options"] == {"scale": 3, "steps": 4}
+    # One variant scored alone gets its own options only.
+    assert reward_options(config, variant="p6")["options"] == {"scale": 3}
+    assert reward_options(config, variant="d3")["options"] == {}
+    # A run older than reward.options: none.
+    del config["reward"]["options"]
+    assert reward_options(config)["options"] == {}

@@ -81,6 +81,9 @@ class SharedRewardConfig:
     directional: str | None = defaults.DIRECTIONAL_REWARD
     #: .py files or module names imported first, to ``register_reward`` your own.
     modules: list[str] = field(default_factory=list)
+    #: The parts' own options (``register_reward(..., options=...)``), each added with ``+``:
+    #: ``+reward.options.<name>=<value>``; an option not given keeps its registered default.
+    options: dict[str, Any] = field(default_factory=dict)
     #: k, the history offset of s_{t-k}.
     k: int = constrained(defaults.HISTORY, ge=1)
     #: alpha, the goal-baseline regularisation of P3, P4 and D5.

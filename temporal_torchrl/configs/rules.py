@@ -31,8 +31,9 @@ from temporal_torchrl.configs.recipe import RecipeConfig
 from temporal_torchrl.configs.reward_quality import RewardQualityConfig
 from temporal_torchrl.encoders import ENCODERS
 from temporal_torchrl.envs import TASKS, baseline_text
-from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
+from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, REWARDS
 from temporal_torchrl.rewards.config import none_or_name
+from temporal_torchrl.rewards.registry import option_value
 
 _NOUNS = {int: ("an integer", "integers"), float: ("a number", "numbers"),
           str: ("a string", "strings")}
@@ -178,6 +179,26 @@ def _check_reward_names(key: str, names: Sequence[Any], registry: Mapping[str, A
                        "register_reward in a module listed in reward.modules)")
 
 
+def _check_reward_options(options: Mapping[str, Any], variants: Sequence[str]) -> None:
+    """Each ``reward.options`` key an option one of ``variants`` (registered names) declares,
+    its value of the type of that option's default."""
+    declared = {key: (name, default) for name in variants
+                for key, default in REWARDS[name].options.items()}
+    for key, value in options.items():
+        if key not in declared:
+            raise _invalid(f"reward.options.{key}", value,
+                           f"an option of {' or '.join(variants) or 'the reward'}: "
+                           f"{', '.join(declared) or 'they declare none'} "
+                           "(register_reward(..., options=...) declares a reward's options)")
+        name, default = declared[key]
+        try:
+            option_value(name, key, value, default)
+        except ValueError:
+            raise _invalid(f"reward.options.{key}", value,
+                           f"a {type(default).__name__} like {name}'s default {default!r}"
+                           ) from None
+
+
 def _check_baseline(task: str, baseline: str) -> None:
     try:
         baseline_text(task, baseline)
@@ -201,6 +222,9 @@ def validate_recipe_config(cfg: DictConfig) -> DictConfig:
     for key, registry in (("positional", POSITIONAL), ("directional", DIRECTIONAL)):
         _check_reward_names(f"reward.{key}", [cfg.reward[key]], registry, cfg.reward[key],
                             "one of")
+    _check_reward_options(cfg.reward.options, [
+        name for name in map(none_or_name, (cfg.reward.positional, cfg.reward.directional))
+        if name is not None])
     longest = cfg.env.max_episode_steps + 1
     capacity = cfg.replay_buffer.capacity
     if capacity is not None and capacity < longest:
@@ -260,6 +284,7 @@ def validate_reward_quality_config(cfg: DictConfig) -> DictConfig:
     if not config_variants(cfg):
         raise _invalid("reward.positional", cfg.reward.positional,
                        "at least one variant to score in reward.positional or reward.directional")
+    _check_reward_options(cfg.reward.options, config_variants(cfg))
     if max(cfg.dataset.random_episodes, cfg.dataset.failed_expert_episodes) < 2:
         raise _invalid("dataset.random_episodes", cfg.dataset.random_episodes,
                        "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "

@@ -3,12 +3,14 @@ directional heads (:mod:`.finetuning`: one loss a module, on one base)."""
 
 from temporal_torchrl.defaults import HEADS_LEARNING_RATE
 from temporal_torchrl.objectives.finetuning import (
+    OBJECTIVE_LOSSES,
     STAGES,
     CertaintyLoss,
     DirectionalLoss,
     FinetuningLoss,
     PositionalRankingLoss,
     finetuning_losses,
+    loss_class,
     ranking_loss,
     remember_certainty_references,
 )
@@ -16,6 +18,7 @@ from temporal_torchrl.objectives.sac import StackedCriticSACLoss, StackedQValueN
 
 __all__ = [
     "HEADS_LEARNING_RATE",
+    "OBJECTIVE_LOSSES",
     "STAGES",
     "CertaintyLoss",
     "DirectionalLoss",
@@ -24,6 +27,7 @@ __all__ = [
     "StackedCriticSACLoss",
     "StackedQValueNetwork",
     "finetuning_losses",
+    "loss_class",
     "ranking_loss",
     "remember_certainty_references",
 ]

@@ -51,9 +51,10 @@ def is_process_key(key: str) -> bool:
 
 
 def configuration_settings(run: Run) -> dict[str, Any]:
-    """The run's flattened config without the seed, the task and the process keys."""
+    """The run's flattened config without the seed, the task, the process keys and empty groups
+    (``reward.options: {}`` says what a run older than the key says by lacking it)."""
     return {key: value for key, value in flatten(run.config).items()
-            if key not in RUN_KEYS and not is_process_key(key)}
+            if key not in RUN_KEYS and not is_process_key(key) and value != {}}
 
 
 def _rho(value: float) -> str:

@@ -10,7 +10,7 @@ from typing import Any
 
 from torch import Tensor
 
-from temporal_torchrl.rewards.registry import single_part
+from temporal_torchrl.rewards.registry import registered, single_part
 from temporal_torchrl.rewards.temporal import TemporalReward
 
 #: :class:`~temporal_torchrl.rewards.TemporalReward`'s arguments by the ``reward.*`` key that
@@ -42,14 +42,17 @@ def uses_vlm_reward(config: Mapping[str, Any]) -> bool:
 
 def reward_options(config: Mapping[str, Any], *, variant: str | None = None) -> dict[str, Any]:
     """:class:`~temporal_torchrl.rewards.TemporalReward`'s keyword arguments from a config's
-    ``reward.*``: its parts and every setting the reward's forward depends on.
+    ``reward.*``: its parts, every setting the reward's forward depends on, and ``options``, the
+    parts' own (``reward.options``, set with ``+reward.options.<name>=<value>``; absent from
+    the configs of runs older than it).
 
     Args:
         config: a config with a ``reward`` section (a run's, or the offline benchmark's).
         variant: None: the parts are the config's ``reward.positional`` and
             ``reward.directional``. A registered reward's name: it is the only part, in the slot
-            of its kind, and the :data:`AGENT_KEYS` are not read (the offline benchmark scores
-            its listed variants one at a time).
+            of its kind, the :data:`AGENT_KEYS` are not read (the offline benchmark scores
+            its listed variants one at a time), and of ``reward.options`` only the variant's
+            own.
     """
     reward = config["reward"]
     if variant is None:
@@ -57,8 +60,12 @@ def reward_options(config: Mapping[str, Any], *, variant: str | None = None) -> 
                  "directional": none_or_name(reward["directional"])}
     else:
         parts = single_part(variant)
+    options = dict(reward.get("options") or {})
+    if variant is not None:
+        options = {key: value for key, value in options.items()
+                   if key in registered(variant).options}
     return {**parts, **{argument: reward[key] for key, argument in CONFIG_KEYS.items()
-                        if variant is None or key not in AGENT_KEYS}}
+                        if variant is None or key not in AGENT_KEYS}, "options": options}
 
 
 def reward_from_config(config: Mapping[str, Any], goal_embedding: Tensor,

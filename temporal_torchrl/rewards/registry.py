@@ -2,7 +2,9 @@
 
 Every reward, built-in or a researcher's own, is added with :func:`register_reward`, which records
 under its name a :class:`RegisteredReward`: the function, its kind (positional or directional),
-what its image head reads and the finetuning objective that trains its heads.
+what its image head reads, the finetuning objective that trains its heads (a built-in loss, or
+one the reward brings) and the options of its own (hyperparameters with their defaults, set from
+a config's ``reward.options``). A new reward with a new hyperparameter is then one file.
 :data:`POSITIONAL`, :data:`DIRECTIONAL`, :data:`IMAGE_INPUTS` and :data:`OBJECTIVES` are read-only
 views of that one dict, so they cannot fall out of step with it.
 :func:`~temporal_torchrl.rewards.heads.heads_input_dims` and
@@ -16,7 +18,8 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 from torch import Tensor
@@ -45,6 +48,10 @@ _SIGNATURE = (f"fn(heads, s, *, g, b, s0=None, s_prev=None, alpha={ALPHA}, posit
               f"projection={PROJECTION!r}, window=None, **unused)")
 
 
+#: The types an option's default may have (what a config's ``reward.options.<key>`` can hold).
+OPTION_TYPES = (bool, int, float, str, type(None))
+
+
 @dataclass(frozen=True)
 class RegisteredReward:
     """One entry of :data:`REWARDS` (see :func:`register_reward` for each field's values).
@@ -53,13 +60,20 @@ class RegisteredReward:
         function: the reward function.
         kind: ``"positional"`` or ``"directional"`` (:data:`KINDS`).
         image_input: what the image head reads (:data:`IMAGE_LAYOUTS`).
-        objective: the finetuning objective of its heads (:data:`OBJECTIVES_BY_KIND`).
+        objective: the finetuning objective of its heads: one of :data:`OBJECTIVES_BY_KIND`, or
+            the name of the reward's own ``loss``.
+        options: the reward's own options by name, each with its default (read-only).
+        loss: the reward's own finetuning loss (a
+            :class:`~temporal_torchrl.objectives.FinetuningLoss` subclass), or None: the
+            built-in loss of ``objective``.
     """
 
     function: RewardFunction
     kind: str
     image_input: str | None
     objective: str
+    options: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    loss: type | None = None
 
 
 #: Every registered reward by name, in the order of registration.
@@ -114,6 +128,7 @@ OBJECTIVES = RegistryView("OBJECTIVES", "objective")
 
 def register_reward(name: str, function: RewardFunction, *, kind: str,
                     image_input: str | None = "embedding", objective: str | None = None,
+                    options: Mapping[str, Any] | None = None, loss: type | None = None,
                     overwrite: bool = False) -> None:
     """Add a reward function under ``name`` so :class:`TemporalReward` can use it.
 
@@ -147,6 +162,8 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
       goal, ``TemporalReward.directional_reward(..., straight_path=True)``): it reads that path
       as ``straight_window(s_prev, s, K)``, or scores it without building it, as d_sequence
       does.
+    - the reward's own ``options``, each by its name: the value a config's
+      ``reward.options.<name>`` (``TemporalReward(options=...)``) sets, else its default.
     - ``**unused``: callers pass every keyword above; a reward ignores those it does not need.
     - Returns the reward, shape ``s.shape[:-1]`` (differentiable in the heads' parameters for
       the finetuning losses).
@@ -163,12 +180,26 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         objective: the loss that finetunes the heads: ``"ranking"`` (positional rewards, the
             default for them), ``"directional"`` (the thesis's directional loss, the default
             for directional rewards) or ``"certainty"`` (directional rewards trained towards a
-            certainty target, like d_certainty). Ignored for zero-shot rewards.
+            certainty target, like d_certainty). Ignored for zero-shot rewards. With ``loss``,
+            any name for it (default: the loss class's name).
+        options: the reward's own hyperparameters, ``{name: default}``; a default is a bool,
+            an int, a float, a string or None. The function receives each as a keyword; a
+            config sets one with ``+reward.options.<name>=<value>`` (of the default's type; an
+            int where the default is a float), and the reward's loss reads them as
+            ``reward.options[name]``. A name must not be one of the keywords above.
+        loss: the reward's own finetuning loss, a
+            :class:`~temporal_torchrl.objectives.FinetuningLoss` subclass that trains this
+            part's heads, constructed as ``loss(reward, goal_image_embedding, stage=stage,
+            **settings)`` with those of the finetuning settings (``delta``, ``l2_margin``,
+            ``same_position``) its ``__init__`` takes
+            (:meth:`~temporal_torchrl.objectives.FinetuningLoss.from_settings`). None: the
+            built-in loss of ``objective``.
         overwrite: replace a reward already registered under ``name`` (of either kind).
 
     Raises:
-        ValueError: for a bad ``name``, ``function``, ``kind``, ``image_input`` or
-            ``objective``, or a ``name`` already registered without ``overwrite=True``.
+        ValueError: for a bad ``name``, ``function``, ``kind``, ``image_input``,
+            ``objective``, ``options`` or ``loss``, or a ``name`` already registered without
+            ``overwrite=True``.
 
     Example:
         >>> import torch
@@ -209,10 +240,24 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
         raise ValueError(f"register_reward({name!r}): image_input='window' is for directional "
                          "rewards (the window's steps are its directions); got kind="
                          f"{kind!r}.")
-    objective = OBJECTIVES_BY_KIND[kind][0] if objective is None else objective
-    if objective not in OBJECTIVES_BY_KIND[kind]:
-        raise ValueError(f"register_reward({name!r}): objective={objective!r}; a {kind} "
-                         f"reward is trained with one of {', '.join(OBJECTIVES_BY_KIND[kind])}.")
+    if loss is not None:
+        if image_input is None:
+            raise ValueError(f"register_reward({name!r}): loss={loss!r} for a zero-shot reward "
+                             "(image_input=None), which has no heads to finetune.")
+        if not callable(getattr(loss, "from_settings", None)):
+            raise ValueError(f"register_reward({name!r}): loss={loss!r}; expected a subclass of "
+                             "temporal_torchrl.objectives.FinetuningLoss.")
+        objective = loss.__name__ if objective is None else objective
+        if not isinstance(objective, str) or not objective:
+            raise ValueError(f"register_reward({name!r}): objective={objective!r}; expected "
+                             "a name for the reward's own loss.")
+    else:
+        objective = OBJECTIVES_BY_KIND[kind][0] if objective is None else objective
+        if objective not in OBJECTIVES_BY_KIND[kind]:
+            raise ValueError(f"register_reward({name!r}): objective={objective!r}; a {kind} "
+                             f"reward is trained with one of "
+                             f"{', '.join(OBJECTIVES_BY_KIND[kind])}, or pass its own loss=.")
+    options = _checked_options(name, options)
     if objective == "certainty" and image_input not in ("embedding", "concatenated"):
         raise ValueError(f"register_reward({name!r}): objective='certainty' needs a reward of "
                          "one direction s - s_prev (image_input 'embedding' or "
@@ -220,14 +265,14 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
     if not callable(function):
         raise ValueError(f"register_reward({name!r}): function={function!r} is not callable; "
                          f"expected a function {_SIGNATURE}.")
-    _check_signature(name, function)
+    _check_signature(name, function, options)
     if name in REWARDS and not overwrite:
         raise ValueError(f"register_reward: a {REWARDS[name].kind} reward {name!r} is already "
                          "registered; choose another name or pass overwrite=True to replace "
                          "it.")
     # An overwritten name moves to the end, as a new registration would stand.
     REWARDS.pop(name, None)
-    REWARDS[name] = RegisteredReward(function, kind, image_input, objective)
+    REWARDS[name] = RegisteredReward(function, kind, image_input, objective, options, loss)
 
 
 def unregister_reward(name: str) -> None:
@@ -277,15 +322,55 @@ def objective_of(name: str) -> str:
     return registered(name).objective
 
 
-def _check_signature(name: str, function: RewardFunction) -> None:
+def option_value(name: str, key: str, value: Any, default: Any) -> Any:
+    """``value`` for the option ``key`` of the reward ``name``, checked against its
+    ``default``'s type (an int is taken where the default is a float, as a float).
+
+    Raises:
+        ValueError: for a value of another type.
+    """
+    if default is None:  # any config value
+        return value
+    if isinstance(default, float) and isinstance(value, int | float) \
+            and not isinstance(value, bool):
+        return float(value)
+    expected = type(default)
+    if type(value) is not expected:
+        raise ValueError(f"option {key}={value!r} of reward {name!r}; expected a "
+                         f"{expected.__name__} like its default {default!r}.")
+    return value
+
+
+def _checked_options(name: str, options: Mapping[str, Any] | None) -> Mapping[str, Any]:
+    if options is None:
+        return MappingProxyType({})
+    if not isinstance(options, Mapping):
+        raise ValueError(f"register_reward({name!r}): options={options!r}; expected a dict of "
+                         "each option's default, such as {'beta': 2.0}.")
+    for key, default in options.items():
+        if not isinstance(key, str) or not key.isidentifier():
+            raise ValueError(f"register_reward({name!r}): option name {key!r}; expected a "
+                             "Python identifier (the function receives it as a keyword).")
+        if key in _CALL_KEYWORDS:
+            raise ValueError(f"register_reward({name!r}): option {key!r} is one of the keywords "
+                             f"every reward is called with ({', '.join(_CALL_KEYWORDS)}); "
+                             "choose another name.")
+        if not isinstance(default, OPTION_TYPES):
+            raise ValueError(f"register_reward({name!r}): option {key}={default!r}; a default "
+                             "is a bool, an int, a float, a string or None (a config value).")
+    return MappingProxyType(dict(options))
+
+
+def _check_signature(name: str, function: RewardFunction,
+                     options: Mapping[str, Any]) -> None:
     try:
         signature = inspect.signature(function)
     except (TypeError, ValueError):  # Some builtins and extension functions have none.
         return
     try:
-        signature.bind(None, None, **_CALL_KEYWORDS)
+        signature.bind(None, None, **_CALL_KEYWORDS, **options)
     except TypeError as error:
         raise ValueError(
             f"register_reward({name!r}): {getattr(function, '__name__', function)!r} cannot be "
-            f"called the way rewards are ({error}); expected {_SIGNATURE} (**unused takes the "
-            "keywords a reward does not need).") from None
+            f"called the way rewards are ({error}); expected {_SIGNATURE}, its options as keywords "
+            "too (**unused takes the keywords a reward does not need).") from None

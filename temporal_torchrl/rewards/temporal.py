@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import torch
 from torch import Tensor, nn
 
 from temporal_torchrl import defaults
 from temporal_torchrl.rewards.certainty import CertaintyMemory
 from temporal_torchrl.rewards.heads import RewardHeads, heads_input_dims
-from temporal_torchrl.rewards.registry import DIRECTIONAL, POSITIONAL, REWARDS, registered
+from temporal_torchrl.rewards.registry import (
+    DIRECTIONAL,
+    POSITIONAL,
+    REWARDS,
+    option_value,
+    registered,
+)
 
 REWARD_KEYS = ("task_reward", "positional_reward", "directional_reward", "vlm_reward", "reward")
 
@@ -62,6 +71,9 @@ class TemporalReward(nn.Module):
             (:attr:`certainty`). :meth:`directional_reward`, which the finetuning losses call,
             stays unscaled: the heads are trained as they are (the "step function"), the
             factor only shapes the reward the agent sees.
+        options: values of the parts' own options (declared with
+            :func:`~temporal_torchrl.rewards.register_reward`'s ``options``), by name; an option
+            not given takes its registered default. An option both parts declare goes to both.
 
     Attributes:
         positional_heads: the trainable :class:`RewardHeads` f^P, or None when that part is
@@ -71,6 +83,9 @@ class TemporalReward(nn.Module):
             else None: the history transform and the replay buffer need no window.
         certainty: the :class:`~temporal_torchrl.rewards.certainty.CertaintyMemory` of
             ``certainty_scaling`` (None without it).
+        options: every option of the parts, by name: the value given, else the registered
+            default (empty for the built-in rewards, which declare none). A part's loss reads
+            its hyperparameters here.
 
     Example:
         >>> import torch
@@ -92,7 +107,8 @@ class TemporalReward(nn.Module):
                  window_length: int = defaults.WINDOW_LENGTH,
                  certainty_bandwidth: float = defaults.CERTAINTY_BANDWIDTH,
                  certainty_prior: float = defaults.CERTAINTY_PRIOR,
-                 certainty_scaling: bool = False):
+                 certainty_scaling: bool = False,
+                 options: Mapping[str, Any] | None = None):
         super().__init__()
         if isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) \
                 or embedding_dim < 1:
@@ -140,11 +156,32 @@ class TemporalReward(nn.Module):
         self.certainty_prior = float(certainty_prior)
         self.certainty = (CertaintyMemory(embedding_dim, certainty_bandwidth, certainty_prior)
                           if certainty_scaling else None)
+        self.options = self._options(options or {})
         self.register_buffer("goal_embedding", self._text_embedding(goal_embedding, "goal"))
         self.register_buffer("baseline_embedding",
                              self._text_embedding(baseline_embedding, "baseline"))
         self.positional_heads = self._heads(positional)
         self.directional_heads = self._heads(directional)
+
+    def _options(self, given: Mapping[str, Any]) -> dict[str, Any]:
+        """The parts' options, ``given`` values checked against the registered defaults."""
+        parts = [name for name in (self.positional, self.directional) if name is not None]
+        declared = {key: (name, default) for name in parts
+                    for key, default in REWARDS[name].options.items()}
+        unknown = sorted(set(given) - set(declared))
+        if unknown:
+            known = ", ".join(declared) or "none"
+            raise ValueError(f"options {', '.join(map(repr, unknown))}: not an option of "
+                             f"{' or '.join(parts) or 'this reward (no parts)'}; their options: "
+                             f"{known} (register_reward(..., options=...) declares them).")
+        return {key: option_value(name, key, given[key], default) if key in given else default
+                for key, (name, default) in declared.items()}
+
+    def part_options(self, variant: str) -> dict[str, Any]:
+        """The keyword arguments of ``variant``'s options in a call of its function: this
+        reward's values of them (:attr:`options`), else their registered defaults."""
+        return {key: self.options.get(key, default)
+                for key, default in REWARDS[variant].options.items()}
 
     def _heads(self, variant: str | None) -> RewardHeads | None:
         """Heads sized by the variant's registered image input; None if absent or zero-shot."""
@@ -202,7 +239,7 @@ class TemporalReward(nn.Module):
         return REWARDS[self.positional].function(
             self.positional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha, position=None,
-            projection=self.projection, window=window)
+            projection=self.projection, window=window, **self.part_options(self.positional))
 
     def directional_reward(self, embedding: Tensor, previous_embedding: Tensor,
                            initial_embedding: Tensor | None = None,
@@ -231,10 +268,12 @@ class TemporalReward(nn.Module):
                              "previous_embedding to embedding; pass window=None with it.")
         if not straight_path:
             self._check_window(window)
-        return REWARDS[variant or self.directional].function(
+        variant = variant or self.directional
+        return REWARDS[variant].function(
             self.directional_heads, embedding, s0=initial_embedding, s_prev=previous_embedding,
             g=self.goal_embedding, b=self.baseline_embedding, alpha=self.alpha,
-            position=position, projection=self.projection, window=window)
+            position=position, projection=self.projection, window=window,
+            **self.part_options(variant))
 
     def forward(self, embedding: Tensor, initial_embedding: Tensor, previous_embedding: Tensor,
                 success: Tensor, window: Tensor | None = None) -> dict[str, Tensor]:
@@ -268,7 +307,8 @@ class TemporalReward(nn.Module):
     def extra_repr(self) -> str:
         window = "" if self.window_length is None else f", window_length={self.window_length}"
         scaling = "" if self.certainty is None else ", certainty_scaling=True"
+        options = f", options={self.options!r}" if self.options else ""
         return (f"embedding_dim={self.embedding_dim}, positional={self.positional!r}, "
                 f"directional={self.directional!r}, rho={self.rho}, lambda_={self.lambda_}, "
                 f"k={self.k}, alpha={self.alpha}, projection={self.projection!r}{window}"
-                f"{scaling}")
+                f"{scaling}{options}")

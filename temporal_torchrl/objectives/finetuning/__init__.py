@@ -16,9 +16,11 @@ Stage 2 (thesis 3.1.3.2, 4.3.3.2) starts as soon as the replay holds a positive 
 losses are told the stage (``loss.stage``) by their caller, the
 :class:`~temporal_torchrl.training.RewardHeadTrainer`. Each loss owns only its heads, so
 ``torch.optim.Adam(loss.parameters(), lr=HEADS_LEARNING_RATE)`` is its optimizer.
-:func:`finetuning_losses` builds the losses a reward's registered objectives ask for:
-:class:`~.positional.PositionalRankingLoss` (thesis 3.1.3), :class:`~.directional.DirectionalLoss`
-(thesis 4.3.3) and, beyond the thesis (section 6.4 proposal), :class:`~.certainty.CertaintyLoss`.
+:func:`finetuning_losses` builds the losses a reward's registered objectives ask for
+(:data:`OBJECTIVE_LOSSES`): :class:`~.positional.PositionalRankingLoss` (thesis 3.1.3),
+:class:`~.directional.DirectionalLoss` (thesis 4.3.3) and, beyond the thesis (section 6.4
+proposal), :class:`~.certainty.CertaintyLoss`; or the reward's own loss, registered with it
+(:func:`~temporal_torchrl.rewards.register_reward`'s ``loss``).
 
 The rewards are computed by the :class:`~temporal_torchrl.rewards.TemporalReward` itself
 (:meth:`~temporal_torchrl.rewards.TemporalReward.positional_reward`,
@@ -39,44 +41,55 @@ from temporal_torchrl.objectives.finetuning.certainty import (
 )
 from temporal_torchrl.objectives.finetuning.directional import DirectionalLoss
 from temporal_torchrl.objectives.finetuning.positional import PositionalRankingLoss, ranking_loss
-from temporal_torchrl.rewards import TemporalReward, objective_of
+from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.rewards.registry import registered
+
+#: The loss of each built-in objective (:data:`~temporal_torchrl.rewards.registry.
+#: OBJECTIVES_BY_KIND`), for a reward registered without a ``loss`` of its own.
+OBJECTIVE_LOSSES: dict[str, type[FinetuningLoss]] = {
+    "ranking": PositionalRankingLoss, "directional": DirectionalLoss,
+    "certainty": CertaintyLoss}
+
+
+def loss_class(variant: str) -> type[FinetuningLoss]:
+    """The loss that finetunes the heads of the reward registered as ``variant``: its own
+    ``loss``, else its objective's (:data:`OBJECTIVE_LOSSES`)."""
+    entry = registered(variant)
+    return entry.loss if entry.loss is not None else OBJECTIVE_LOSSES[entry.objective]
 
 
 def finetuning_losses(reward: TemporalReward, goal_image_embedding: Tensor, *, stage: int,
                       delta: float = DELTA, l2_margin: float = L2_MARGIN,
                       same_position: bool = SAME_POSITION) -> list[FinetuningLoss]:
-    """The losses that finetune ``reward``'s heads, by each part's registered objective
-    (:func:`~temporal_torchrl.rewards.register_reward`): :class:`PositionalRankingLoss` for a
-    positional part with heads, :class:`DirectionalLoss` or :class:`CertaintyLoss` for a
-    directional part with heads. Give each its own optimizer over ``loss.parameters()``.
+    """The losses that finetune ``reward``'s heads, the positional part's then the directional
+    part's, each part with heads by its registration (:func:`loss_class`): its own ``loss``, or
+    its objective's, :class:`PositionalRankingLoss`, :class:`DirectionalLoss` or
+    :class:`CertaintyLoss`. Give each its own optimizer over ``loss.parameters()``.
 
     Args:
         reward: the reward whose heads are trained.
         goal_image_embedding: s_g ``[D]``.
         stage: the stage the losses start in (1 or 2; each loss's ``stage`` changes it).
-        delta, l2_margin: of :class:`PositionalRankingLoss`.
-        same_position: of :class:`DirectionalLoss`.
+        delta, l2_margin: of :class:`PositionalRankingLoss` (and of a loss that takes them).
+        same_position: of :class:`DirectionalLoss` (and of a loss that takes it).
     """
-    losses: list[FinetuningLoss] = []
-    if reward.positional_heads is not None:
-        losses.append(PositionalRankingLoss(reward, goal_image_embedding, stage=stage,
-                                            delta=delta, l2_margin=l2_margin))
-    if reward.directional_heads is not None:
-        if objective_of(reward.directional) == "certainty":
-            losses.append(CertaintyLoss(reward, goal_image_embedding, stage=stage))
-        else:
-            losses.append(DirectionalLoss(reward, goal_image_embedding, stage=stage,
-                                          same_position=same_position))
-    return losses
+    settings = {"delta": delta, "l2_margin": l2_margin, "same_position": same_position}
+    return [loss_class(variant).from_settings(reward, goal_image_embedding, stage=stage,
+                                              **settings)
+            for variant, heads in ((reward.positional, reward.positional_heads),
+                                   (reward.directional, reward.directional_heads))
+            if heads is not None]
 
 
 __all__ = [
+    "OBJECTIVE_LOSSES",
     "STAGES",
     "CertaintyLoss",
     "DirectionalLoss",
     "FinetuningLoss",
     "PositionalRankingLoss",
     "finetuning_losses",
+    "loss_class",
     "ranking_loss",
     "remember_certainty_references",
 ]

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import inspect
+from typing import Any
+
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
@@ -27,6 +30,12 @@ class FinetuningLoss(LossModule):
     loss reads the groups that stage uses (:meth:`groups`): ``"negative"`` in stage 1,
     ``"positive"`` and ``"positive_pair"`` too in stage 2.
 
+    A registered reward's own loss (:func:`~temporal_torchrl.rewards.register_reward`'s
+    ``loss``) is a subclass whose ``__init__`` takes ``(reward, goal_image_embedding, *,
+    stage)`` and, where it uses them, finetuning settings by name (``delta``, ``l2_margin``,
+    ``same_position``); :meth:`from_settings` builds it. Its hyperparameters are the reward's
+    options (``self.reward.options``), so a config sets them as ``reward.options.<name>``.
+
     Args:
         reward: the reward whose heads are trained.
         heads: those heads (``reward.positional_heads`` or ``reward.directional_heads``).
@@ -45,6 +54,20 @@ class FinetuningLoss(LossModule):
         self.register_buffer("goal_image_embedding",
                              torch.as_tensor(goal_image_embedding, dtype=torch.float32).clone())
         self.stage = stage
+
+    @classmethod
+    def from_settings(cls, reward: TemporalReward, goal_image_embedding: Tensor, *,
+                      stage: int, **settings: Any) -> FinetuningLoss:
+        """The loss of ``reward``'s heads, given those of the finetuning ``settings`` (the
+        recipe's ``reward.delta``, ``reward.l2_margin``, ``reward.same_position``, by name) that
+        its ``__init__`` takes (all of them when it takes ``**kwargs``): how
+        :func:`~temporal_torchrl.objectives.finetuning_losses` builds every loss, the built-in
+        ones and a registered reward's own."""
+        parameters = inspect.signature(cls).parameters
+        if not any(parameter.kind is parameter.VAR_KEYWORD
+                   for parameter in parameters.values()):
+            settings = {key: value for key, value in settings.items() if key in parameters}
+        return cls(reward, goal_image_embedding, stage=stage, **settings)
 
     @property
     def stage(self) -> int:
