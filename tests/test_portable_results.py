@@ -15,7 +15,7 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 MACHINE_PATH = re.compile(r"(?<![\w.~-])/(?:work|home|tmp|root|Users|mnt|scratch|private|var)/")
 
 
-def make_run(run: Path, finished: bool) -> None:
+def make_run(run: Path, finished: bool, evaluated: bool = False) -> None:
     (run / "logs" / "seed0" / "scalars").mkdir(parents=True)
     (run / "replay").mkdir()
     (run / "replay" / "000000.pt").write_bytes(b"replay")
@@ -26,6 +26,8 @@ def make_run(run: Path, finished: bool) -> None:
     (run / "logs" / "seed0" / "scalars" / "loss.csv").write_text("1,2\n")
     if finished:
         (run / "summary.json").write_text("{}")
+    if evaluated:
+        (run / "eval.csv").write_text("episode,env_steps\n10,5000\n")
 
 
 def test_collect_copies_finished_runs_raw_files_only(tmp_path):
@@ -33,6 +35,8 @@ def test_collect_copies_finished_runs_raw_files_only(tmp_path):
     make_run(sweep / "window-close" / "sac_stage2" / "seed0", finished=True)
     make_run(sweep / "window-close" / "sac_stage2" / "seed1", finished=False)
     make_run(sweep / "drawer-open" / "sac_stage2" / "seed0", finished=True)
+    make_run(sweep / "push" / "sac_stage2_randomgoal" / "seed0", finished=True,
+             evaluated=True)
     # The latest launch into the shared sweep folder was another study's.
     (sweep / "multirun.yaml").write_text(yaml.safe_dump({"hydra": {
         "runtime": {"cwd": str(tmp_path / "machine")},
@@ -46,6 +50,9 @@ def test_collect_copies_finished_runs_raw_files_only(tmp_path):
         "config.json", "episodes.csv", "logs", "logs/seed0", "logs/seed0/scalars",
         "logs/seed0/scalars/loss.csv", "metrics.jsonl", "summary.json"]
     assert sorted(path.name for path in (tmp_path / "results").iterdir()) == ["window-close"]
+
+    copied = collect_study(sweep, tmp_path / "evaluated", ["push/*/*"])
+    assert (copied[0] / "eval.csv").read_text() == "episode,env_steps\n10,5000\n"
 
 
 def test_run_paths_are_relative_to_the_folders_given(tmp_path):
