@@ -1,12 +1,13 @@
 """A study's raw files, copied out of its sweep so that they can be committed.
 
 A finished run's raw files are what the reports read: its config, summary, episode rows, periodic
-evaluations (``eval.csv``, where the run evaluated) and logged metrics (``metrics.jsonl`` and the CSV logger's ``logs/``). Its checkpoints and replay
-episodes (megabytes a run, needed only to resume it or to plot its reward curves) stay in the
-sweep. Hydra's ``multirun.yaml`` is not copied: a sweep folder holds one, which each launch
-rewrites with its own overrides, while a study's runs may come from several launches and share the
-folder with other studies' runs, so the file would record whichever launch came last. A run's
-``config.json`` is the whole resolved config it ran; the study's README names its launches.
+evaluations (``eval.csv``, where the run evaluated) and logged metrics (``metrics.jsonl`` and the
+CSV logger's ``logs/``). Its checkpoints and replay episodes (megabytes a run, needed only to
+resume it or to plot its reward curves) stay in the sweep. Hydra's ``multirun.yaml`` is not copied:
+a sweep folder holds one, which each launch rewrites with its own overrides, while a study's runs
+may come from several launches and share the folder with other studies' runs, so the file would
+record whichever launch came last. A run's ``config.json`` is the whole resolved config it ran; the
+study's README names its launches.
 """
 
 from __future__ import annotations
