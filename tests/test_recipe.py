@@ -285,7 +285,8 @@ def test_runs_report_where_their_time_goes(tmp_path):
     start = time.perf_counter()
     summary = sac_temporal.train(config(tmp_path, "reward.directional=d3", "protocol=stage2",
                                         "train.preload_positives=1", "train.episodes=2",
-                                        "logger.log_every=10"))
+                                        "logger.log_every=10", "eval.every=1",
+                                        "eval.episodes=1"))
     wall = time.perf_counter() - start
     phases = summary["phase_seconds"]
     assert set(phases) == {f"{phase}" for phase in PHASES}  # each ran in this run

@@ -63,18 +63,18 @@ class EvaluationLog:
             write_file(self.path, lambda file: _write_rows(file, kept))
 
 
-def evaluation_summary(rows: list[dict[str, float]]) -> dict[str, Any]:
-    """``summary.json``'s evaluation entries: the last and the best success rate, with the
-    training episode each was taken after (empty without evaluations)."""
+def evaluation_summary(rows: list[dict[str, float]]) -> dict[str, Any] | None:
+    """``summary.json``'s ``evaluation``: the last and the best success rate, with the training
+    episode each was taken after (None without evaluations)."""
     if not rows:
-        return {}
+        return None
     best = max(rows, key=lambda row: row["success_rate"])  # the first of equal rates
-    return {"evaluation": {"evaluations": len(rows),
-                           "last_success_rate": rows[-1]["success_rate"],
-                           "last_episode": int(rows[-1]["episode"]),
-                           "best_success_rate": best["success_rate"],
-                           "best_episode": int(best["episode"]),
-                           "last_final_success_rate": rows[-1]["final_success_rate"]}}
+    return {"evaluations": len(rows),
+            "last_success_rate": rows[-1]["success_rate"],
+            "last_episode": int(rows[-1]["episode"]),
+            "best_success_rate": best["success_rate"],
+            "best_episode": int(best["episode"]),
+            "last_final_success_rate": rows[-1]["final_success_rate"]}
 
 
 def _write_rows(file: IO[bytes], rows: list[dict[str, str]]) -> None:

@@ -20,7 +20,7 @@ def run_summary(cfg: DictConfig, progress: TrainingProgress, *, steps_per_second
     (None until the run has reached it), the counters, the throughput, the seconds per phase of
     the loop (:mod:`~temporal_torchrl.training.timing`; this process's), the last training
     metrics, the resolved config and, with ``evaluations`` (``eval.csv``'s rows), the last and
-    the best evaluation."""
+    the best evaluation (None without)."""
     successes = progress.successes
     budget = get_task(cfg.env.task).ras_budget
     # RAS's window (thesis 5.1), shortened to a budget below it
@@ -34,4 +34,4 @@ def run_summary(cfg: DictConfig, progress: TrainingProgress, *, steps_per_second
         "encoder": encoder, "updates": progress.updates, "last_metrics": progress.last_metrics,
         "relay_steps": relay_steps, "phase_seconds": phase_seconds or {},
         "config": OmegaConf.to_container(cfg, resolve=True),
-        **evaluation_summary(evaluations or [])}
+        "evaluation": evaluation_summary(evaluations or [])}

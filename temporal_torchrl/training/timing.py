@@ -11,6 +11,7 @@ The recipe times each phase as TorchRL's SAC recipe does, under ``timeit("time/<
 - ``head_update``: the reward heads' finetuning step;
 - ``episode_end``: an ended episode labelled, inserted, written to disk and logged;
 - ``checkpoint``: writing the checkpoint;
+- ``evaluation``: the periodic evaluation of the deterministic policy (``eval.every``);
 - ``logging``: the training metrics' window flushed to the loggers.
 
 :class:`PhaseClock` reads the totals: :meth:`~PhaseClock.window` gives the seconds since its
@@ -38,7 +39,7 @@ from torchrl import timeit
 
 PREFIX = "time/"
 PHASES = ("env_step", "replay_sample", "relabel", "sac_update", "head_update", "episode_end",
-          "checkpoint", "logging")
+          "checkpoint", "evaluation", "logging")
 
 
 def timed(iterable: Iterable[Any], phase: str) -> Iterator[Any]:
