@@ -179,7 +179,7 @@ class TemporalReward(nn.Module):
 
     def part_options(self, variant: str) -> dict[str, Any]:
         """The keyword arguments of ``variant``'s options in a call of its function: this
-        reward's values of them (:attr:`options`), else their registered defaults."""
+        reward's values of them (``options``), else their registered defaults."""
         return {key: self.options.get(key, default)
                 for key, default in REWARDS[variant].options.items()}
 

@@ -44,8 +44,9 @@ from temporal_torchrl.objectives.finetuning.positional import PositionalRankingL
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.rewards.registry import registered
 
-#: The loss of each built-in objective (:data:`~temporal_torchrl.rewards.registry.
-#: OBJECTIVES_BY_KIND`), for a reward registered without a ``loss`` of its own.
+#: The loss of each built-in objective
+#: (:data:`~temporal_torchrl.rewards.registry.OBJECTIVES_BY_KIND`), for a reward registered
+#: without a ``loss`` of its own.
 OBJECTIVE_LOSSES: dict[str, type[FinetuningLoss]] = {
     "ranking": PositionalRankingLoss, "directional": DirectionalLoss,
     "certainty": CertaintyLoss}
