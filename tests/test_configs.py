@@ -2,6 +2,9 @@
 refuses a wrong type naming the key, the declared ranges and the rules refuse a bad value naming
 the key, and a resumed config is typed and checked like a new one."""
 
+import dataclasses
+import inspect
+import itertools
 import json
 import re
 
@@ -14,7 +17,6 @@ from omegaconf import OmegaConf
 from temporal_torchrl.configs import RecipeConfig, RewardQualityConfig
 from temporal_torchrl.configs.rules import validate_recipe_config, validate_reward_quality_config
 from temporal_torchrl.runs import resumed_config
-from temporal_torchrl.runs.layout import flatten
 
 
 def composed(config_name: str, *overrides: str):
@@ -24,18 +26,26 @@ def composed(config_name: str, *overrides: str):
 
 @pytest.mark.parametrize(("yaml_file", "schema"), [
     ("config.yaml", RecipeConfig), ("evaluate_rewards.yaml", RewardQualityConfig)])
-def test_the_yaml_states_schema_keys_and_leaves_the_librarys_defaults_to_it(yaml_file, schema):
+def test_every_setting_has_one_home_the_schema(yaml_file, schema):
+    """The YAML holds the composition and Hydra's settings only: every key's default is stated
+    in the schema, and there each key says what it means in a ``#:`` comment (a group, by its
+    class's docstring)."""
     written = OmegaConf.to_container(OmegaConf.load(RECIPES / yaml_file))
-    del written["defaults"], written["hydra"]  # the composition and Hydra's own settings
-    declared = OmegaConf.to_container(OmegaConf.structured(schema))
-    written, declared = flatten(written), flatten(declared)
-    assert set(written) <= set(declared)
-    assert {key: value for key, value in written.items() if declared[key] != value} == {}
-    # The reward's and relay's settings are the library's defaults (temporal_torchrl.defaults):
-    # the schema reads them from there, the YAML does not restate them.
-    restated = [key for key in written if key.startswith(("train.relay_", "reward."))
-                and key not in ("reward.modules", "reward.positional", "reward.directional")]
-    assert restated == []
+    assert set(written) == {"defaults", "hydra"}
+    module = inspect.getmodule(schema)
+    classes = [cls for _, cls in inspect.getmembers(module, dataclasses.is_dataclass)
+               if cls.__module__ == module.__name__]
+    undocumented = []
+    for cls in classes:
+        assert cls.__doc__, cls.__name__
+        groups = {field.name for field in dataclasses.fields(cls)
+                  if dataclasses.is_dataclass(field.default_factory)}
+        lines = inspect.getsource(cls).splitlines()
+        for before, line in itertools.pairwise(lines):
+            key = re.match(r" {4}(\w+): ", line)
+            if key and key[1] not in groups and not before.strip().startswith("#:"):
+                undocumented.append(f"{cls.__name__}.{key[1]}")
+    assert undocumented == []
 
 
 def test_defaults_presets_and_protocols_pass_the_rules():

@@ -116,8 +116,12 @@ SPANS = override_spans()
 
 
 def single_run(arguments: list[str]) -> tuple[list[str], bool]:
-    """A ``-m`` sweep's first job: each swept key at its first value."""
+    """A ``-m`` sweep's first job: each swept key at its first value (Hydra's ``--cfg <part>``
+    left out)."""
     multirun = "-m" in arguments
+    if "--cfg" in arguments:  # Hydra's own flag (print the config): it and its value go
+        index = arguments.index("--cfg")
+        arguments = arguments[:index] + arguments[index + 2:]
     overrides = [argument for argument in arguments if argument != "-m"]
     parsed = OverridesParser.create().parse_overrides(overrides)
     first = [f"{override.get_key_element()}={next(override.sweep_string_iterator())}"

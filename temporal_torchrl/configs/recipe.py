@@ -1,12 +1,20 @@
-"""The schema of ``recipes/sac_temporal.py``'s config: each key's type, default and simple range.
+"""The config of ``recipes/sac_temporal.py``: every key's type, default, range and meaning.
 
-``recipes/config.yaml`` names it first in its defaults list (``recipe_schema``), so Hydra
-refuses a value of the wrong type as it composes, naming the key; the ranges declared here with
-:func:`~temporal_torchrl.configs.fields.constrained` and the rules that relate keys or need code
-(:mod:`temporal_torchrl.configs.rules`) are checked before a run does any work. The
-``reward.*`` keys are documented here, beside their defaults, which are the library's own
-(:mod:`temporal_torchrl.defaults`, read from there: the YAML files do not restate them); the other
-keys in ``config.yaml``'s comments.
+This module is the one home of the recipe's settings. ``recipes/config.yaml`` holds only the
+defaults list (this schema, ``recipe_schema``, first; then the preset and the protocol) and
+Hydra's own settings; the presets and protocols (``recipes/preset``, ``recipes/protocol``) state
+only what they change. Hydra refuses a value of the wrong type as it composes, naming the key;
+the ranges declared here with :func:`~temporal_torchrl.configs.fields.constrained` and the rules
+that relate keys or need code (:mod:`temporal_torchrl.configs.rules`) are checked before a run
+does any work. The library's own defaults (the reward's, relay's, the evaluation's) are read from
+:mod:`temporal_torchrl.defaults`. ``python recipes/sac_temporal.py --cfg job`` prints the
+composed config.
+
+The default run is the whole pipeline offline on a CPU (time and output: README.md): rendering
+at 64x64, the package's own small vision-language encoder (``metaworld_small``, trained with
+LIV's objective; its weights ship in the package), the thesis's best reward (FuRL ρ 1.0 + D3 λ
+4.0, generic baseline) and 5 episodes of 500 steps, 1,000 of them random. The thesis presets
+switch to the LIV encoder at 256x256, 1,000 episodes and 10,000 random steps.
 
 The ``Shared*`` classes hold the keys ``recipes/evaluate_rewards.py`` shares with the training
 recipe (:mod:`temporal_torchrl.configs.reward_quality`), so both state them once.
@@ -31,11 +39,17 @@ LOGGER_BACKENDS = ("wandb", "csv", "none")
 class SharedEnvConfig:
     """``env.*`` keys of both recipes: the task, its layout and its rendered frames."""
 
+    #: Any Metaworld MT50 short name; the thesis evaluates six.
     task: str = "drawer-open"
+    #: The layout (fixed goal) and every random generator of the run.
     seed: int = constrained(0, ge=0)
+    #: Steps per episode (Metaworld's truncation).
     max_episode_steps: int = constrained(500, ge=1)
+    #: Side of the rendered frames (square); only encoders that read pixels use them.
     image_size: int = constrained(64, ge=1)
+    #: The Metaworld camera rendered.
     camera: str = "corner2"
+    #: Shadows, reflections and MSAA off (about 8x faster on a CPU); false: Metaworld's look.
     fast_render: bool = True
 
 
@@ -43,6 +57,7 @@ class SharedEnvConfig:
 class EnvConfig(SharedEnvConfig):
     """``env.*``."""
 
+    #: Copies of the task stepped in parallel worker processes (the thesis: 1).
     num_envs: int = constrained(1, ge=1)
     #: fixed: one layout per run, from env.seed (the thesis) | random: a new layout at every
     #: reset, from a stream seeded by env.seed (the goal then observable).
@@ -63,11 +78,17 @@ class EvalConfig:
 
 @dataclass
 class EncoderConfig:
-    """``encoder.*``; ``options`` is free: ``+encoder.options.<key>=<value>`` adds a key."""
+    """``encoder.*``: the frozen vision-language model."""
 
+    #: metaworld_small | liv | open_clip | state (a random projection of the state vector, no
+    #: rendering and NOT a vision-language model: for checking the algorithm fast).
     name: str = "metaworld_small"
+    #: A local weights file (liv: LIV's ``model.pt``); null downloads LIV.
     checkpoint: str | None = None
+    #: auto (cuda when available, else cpu) | cpu | cuda:0 ...
     device: str = "auto"
+    #: Passed to ``load_encoder``; add keys with ``+``: ``+encoder.options.dim=64`` (state),
+    #: ``+encoder.options.model_name=RN50-quickgelu`` (open_clip).
     options: dict[str, Any] = field(default_factory=dict)
 
 
@@ -129,14 +150,21 @@ class RewardConfig(SharedRewardConfig):
 
 @dataclass
 class SACConfig:
-    """``sac.*``."""
+    """``sac.*``: the agent and its update."""
 
+    #: Transitions per SAC update.
     batch_size: int = constrained(256, ge=1)
+    #: Adam's learning rate of the actor, the critics and the temperature.
     lr: float = constrained(1.0e-4, gt=0)
+    #: The discount.
     gamma: float = constrained(0.99, gt=0, le=1)
+    #: The target critics' soft update, every step.
     tau: float = constrained(0.01, gt=0, le=1)
+    #: The initial temperature (1.0: log alpha = 0).
     alpha_init: float = constrained(1.0, gt=0)
+    #: null: -action_dim / 2 (= -2).
     target_entropy: float | None = None
+    #: The actor's and each critic's hidden layers.
     hidden_sizes: list[int] = constrained([256, 256], ge=1, nonempty=True)
 
 
@@ -144,20 +172,35 @@ class SACConfig:
 class ReplayBufferConfig:
     """``replay_buffer.*`` (``capacity`` against the episode length: the rules)."""
 
+    #: Rows; null: enough for the whole run (capped at 1,000,000).
     capacity: int | None = None
+    #: The dtype the embeddings are stored in (never pixels).
     embedding_dtype: str = constrained("float16", choices=EMBEDDING_DTYPES)
+    #: Where the storage lives: cpu (batches go to train.device through pinned memory) | auto
+    #: (train.device) | any torch device.
     device: str = "cpu"
 
 
 @dataclass
 class TrainConfig:
-    """``train.*``."""
+    """``train.*``: the loop."""
 
+    #: Training episodes (the default run: README.md; the thesis: 1,000).
     episodes: int = constrained(5, ge=1)
+    #: Expert episodes inserted as positives before training (stage 2: 50).
     preload_positives: int = constrained(0, ge=0)
+    #: null: experts kept whole (500 steps), as the thesis release preloads its positives; n: cut
+    #: n steps after the first success.
     expert_steps_after_success: int | None = constrained(None, ge=0)
+    #: Save every successful training episode, whole, in ``<run>/positives/``.
     save_positives: bool = False
+    #: Preload the first ``preload_positives`` positives another run saved (the thesis release's
+    #: stage 2: a stage-1 run with save_positives=true); null: scripted-expert episodes of this
+    #: run's layout.
     positives_from: str | None = None
+    #: FuRL's relay exploration (the release keeps it on): episodes alternate between this agent
+    #: and a SAC agent on the sparse reward until the finetuning holds relay_threshold positive
+    #: states; needs finetuned heads.
     relay: bool = True
     #: Switch agents every period steps, one period drawn per episode.
     relay_periods: list[int] = constrained(list(defaults.RELAY_PERIODS), ge=1, nonempty=True)
@@ -165,39 +208,64 @@ class TrainConfig:
     relay_noise: float = constrained(defaults.RELAY_NOISE, ge=0)
     #: Positive states that end relay (stage 2's 50 preloaded: it never starts).
     relay_threshold: int = constrained(defaults.RELAY_THRESHOLD, ge=0)
+    #: Uniform random actions first (the thesis: 10,000).
     random_steps: int = constrained(1000, ge=0)
+    #: SAC updates per env step after the warm-up, at any env.num_envs (the thesis: 1);
+    #: fractions are carried over (0.5: one update every 2 steps).
     utd_ratio: float = constrained(1.0, ge=0)
+    #: Reward-head updates per env step, likewise.
     reward_updates_per_step: float = constrained(1.0, ge=0)
+    #: Actor, critics, heads, losses, relabelling, batches: auto (cuda when available, else
+    #: cpu) | cpu | cuda:0 ...
     device: str = "auto"
+    #: Episodes between checkpoints; 1 loses at most the episode in progress when killed.
     checkpoint_every: int = constrained(1, ge=1)
+    #: End the process after this many episodes, as if killed (tests).
     stop_after_episodes: int | None = constrained(None, ge=1)
+    #: The tqdm progress bar.
     progress: bool = True
+    #: Torch CPU threads for this run (null: torch's default).
     threads: int | None = constrained(None, ge=1)
 
 
 @dataclass
 class CompileConfig:
-    """``compile.*`` (``cudagraphs`` needs a CUDA ``train.device``: the rules)."""
+    """``compile.*``, as TorchRL's SAC recipe (``cudagraphs`` needs a CUDA ``train.device``:
+    the rules)."""
 
+    #: torch.compile the SAC update, the reward-head losses, the relabelling reward and the
+    #: policy (the CPU studies: true).
     enabled: bool = False
+    #: torch.compile's mode: null (its default) | reduce-overhead | max-autotune.
     mode: str | None = constrained(None, choices=COMPILE_MODES)
+    #: CUDA only: capture the SAC update in a CUDA graph (CudaGraphModule).
     cudagraphs: bool = False
 
 
 @dataclass
 class LoggerConfig:
-    """``logger.*``."""
+    """``logger.*`` (``metrics.jsonl`` is written whatever the backend)."""
 
+    #: csv | wandb | none.
     backend: str = constrained("csv", choices=LOGGER_BACKENDS)
+    #: The wandb project.
     project: str = "temporal-torchrl"
+    #: wandb: offline unless online.
     mode: str = "offline"
+    #: The experiment's name (null: the run directory's).
     exp_name: str | None = None
+    #: SAC updates between logged training metrics (means over them): SAC's losses, alpha,
+    #: entropy; each finetuning loss term; the stage; the number of positive states; mean/std of
+    #: the relabelled r_P and r_D; the seconds per phase of the loop.
     log_every: int = constrained(1000, ge=1)
 
 
 @dataclass
 class RecipeConfig:
-    """The whole config of ``recipes/sac_temporal.py`` (``hydra.*`` is Hydra's own)."""
+    """The whole config of ``recipes/sac_temporal.py`` (``hydra.*`` is Hydra's own, set in
+    ``config.yaml``), beside the defaults list's ``preset`` (none | sac | furl | furl_rho1 | p1..p4
+    | d1..d5 | best ...: ``recipes/preset/*.yaml``) and ``protocol`` (stage1: no preload, TTFS and
+    TT50S | stage2: 50 expert episodes, RAS | furl_paper: FuRL's random-goal protocol)."""
 
     env: EnvConfig = field(default_factory=EnvConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
@@ -208,7 +276,13 @@ class RecipeConfig:
     eval: EvalConfig = field(default_factory=EvalConfig)
     compile: CompileConfig = field(default_factory=CompileConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
+    #: The run directory; null:
+    #: ``<runs_dir>/<task>/<encoder>_<pos>+<dir>_rho<r>_lambda<l>_<baseline>_<protocol>/seed<s>``.
     output_dir: str | None = None
+    #: The root of the default run directories; null: ``runs/``, or in a ``-m`` sweep the sweep
+    #: directory (hydra.sweep.dir).
     runs_dir: str | None = None
+    #: Continue the run in output_dir from its last checkpoint.
     resume: bool = False
+    #: Delete an existing output_dir and start over.
     overwrite: bool = False

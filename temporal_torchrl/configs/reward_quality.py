@@ -1,10 +1,12 @@
-"""The schema of ``recipes/evaluate_rewards.py``'s config (``recipes/evaluate_rewards.yaml``).
+"""The config of ``recipes/evaluate_rewards.py``: every key's type, default, range and meaning.
 
-``env.*``, ``encoder.*`` and ``reward.*`` are the training recipe's
-(:mod:`temporal_torchrl.configs.recipe`), but for the keys that take several values here:
-``env.task`` a task name or a list of them, ``reward.positional`` and ``reward.directional`` a
-variant or a list of variants (each checked by :mod:`temporal_torchrl.configs.rules`). What
-each key means is documented once, in ``evaluate_rewards.yaml``'s comments.
+The one home of the offline benchmark's settings: ``recipes/evaluate_rewards.yaml`` holds only
+the defaults list and Hydra's own settings. ``env.*``, ``encoder.*`` and ``reward.*`` are the
+training recipe's (:mod:`temporal_torchrl.configs.recipe`, with its defaults and meanings), but
+for the keys that take several values here: ``env.task`` a task name or a list of them (one
+table per task and a summary), ``reward.positional`` and ``reward.directional`` a variant or a
+list of variants, every one listed scored (each checked by
+:mod:`temporal_torchrl.configs.rules`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from temporal_torchrl.configs.recipe import EncoderConfig, SharedEnvConfig, Shar
 class RewardQualityEnvConfig(SharedEnvConfig):
     """``env.*``; ``task`` may be a list of task names (one table per task)."""
 
+    #: A Metaworld MT50 short name, or a list of them.
     task: Any = "drawer-open"
 
 
@@ -27,6 +30,7 @@ class RewardQualityEnvConfig(SharedEnvConfig):
 class RewardQualityEncoderConfig(EncoderConfig):
     """``encoder.*``, on the CPU unless told otherwise."""
 
+    #: cpu | auto (cuda when available) | cuda:0 ...
     device: str = "cpu"
 
 
@@ -34,30 +38,44 @@ class RewardQualityEncoderConfig(EncoderConfig):
 class RewardQualityRewardConfig(SharedRewardConfig):
     """``reward.*``; every variant listed in ``positional`` and ``directional`` is scored."""
 
+    #: none, or any of POSITIONAL, or a list of them (your own: ``reward.modules``).
     positional: Any = field(default_factory=lambda: ["liv", "furl", "p1", "p2", "p3", "p4"])
+    #: none, or any of DIRECTIONAL (also d_certainty and d_sequence: beyond the thesis), or a
+    #: list of them.
     directional: Any = field(default_factory=lambda: ["d1", "d2", "d3", "d4", "d5"])
 
 
 @dataclass
 class DatasetConfig:
-    """``dataset.*`` (at least 2 failed episodes of one kind: the rules)."""
+    """``dataset.*``: the scored episodes (at least 2 failed episodes of one kind: the rules)."""
 
+    #: Successful scripted-expert episodes (the positives).
     expert_episodes: int = constrained(16, ge=2)
+    #: Failed episodes of uniform random actions.
     random_episodes: int = constrained(6, ge=0)
+    #: Failed episodes of the expert with a large action noise.
     failed_expert_episodes: int = constrained(6, ge=0)
+    #: The successful experts' action noise (the stage-2 preloaded positives').
     expert_noise: float = constrained(0.1, ge=0)
+    #: As ``train.expert_steps_after_success``.
     expert_steps_after_success: int | None = constrained(5, ge=0)
+    #: The failed experts' noise; doubled while most of their episodes still succeed.
     failure_noise: float = constrained(2.0, gt=0)
+    #: Episodes tried per episode wanted, for each kind, before giving up.
     max_attempts: int = constrained(10, ge=1)
+    #: Of each kind's episodes, the fraction held out for scoring.
     held_out_fraction: float = constrained(0.33, gt=0, lt=1)
+    #: Where collected episodes are cached; null: collect every time.
     cache_dir: str | None = "runs/reward_quality/cache"
 
 
 @dataclass
 class FinetuneConfig:
-    """``finetune.*``."""
+    """``finetune.*``: the heads' finetuning before scoring."""
 
+    #: Head updates per configuration (one batch each).
     updates: int = constrained(1000, ge=0)
+    #: 2: successful and failed episodes; 1: failed episodes only.
     stage: int = constrained(2, choices=(1, 2))
 
 
@@ -70,6 +88,9 @@ class RewardQualityConfig:
     reward: RewardQualityRewardConfig = field(default_factory=RewardQualityRewardConfig)
     dataset: DatasetConfig = field(default_factory=DatasetConfig)
     finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
+    #: One PNG per configuration (the reward along a held-out episode of each kind).
     figures: bool = True
+    #: Torch CPU threads (null: torch's default).
     threads: int | None = constrained(None, ge=1)
+    #: Results in ``<output_dir>/<task>/``, ``summary.md`` for several tasks.
     output_dir: str = "runs/reward_quality"
