@@ -32,6 +32,7 @@ from temporal_torchrl.configs.fields import constrained
 EMBEDDING_DTYPES = ("float16", "bfloat16", "float32")
 #: ``compile.mode``: torch.compile's modes (null: its default).
 COMPILE_MODES = ("default", "reduce-overhead", "max-autotune", "max-autotune-no-cudagraphs")
+#: ``logger.backend``: where the training metrics go besides ``metrics.jsonl``.
 LOGGER_BACKENDS = ("wandb", "csv", "none")
 
 
@@ -80,8 +81,9 @@ class EvalConfig:
 class EncoderConfig:
     """``encoder.*``: the frozen vision-language model."""
 
-    #: metaworld_small | liv | open_clip | state (a random projection of the state vector, no
-    #: rendering and NOT a vision-language model: for checking the algorithm fast).
+    #: One of :data:`~temporal_torchrl.encoders.ENCODERS`; ``state`` is a random projection of
+    #: the state vector, no rendering and NOT a vision-language model: for checking the
+    #: algorithm fast.
     name: str = "metaworld_small"
     #: A local weights file (liv: LIV's ``model.pt``); null downloads LIV.
     checkpoint: str | None = None
@@ -236,7 +238,7 @@ class CompileConfig:
     #: torch.compile the SAC update, the reward-head losses, the relabelling reward and the
     #: policy (the CPU studies: true).
     enabled: bool = False
-    #: torch.compile's mode: null (its default) | reduce-overhead | max-autotune.
+    #: torch.compile's mode: null (its default) or one of :data:`COMPILE_MODES`.
     mode: str | None = constrained(None, choices=COMPILE_MODES)
     #: CUDA only: capture the SAC update in a CUDA graph (CudaGraphModule).
     cudagraphs: bool = False
@@ -246,7 +248,7 @@ class CompileConfig:
 class LoggerConfig:
     """``logger.*`` (``metrics.jsonl`` is written whatever the backend)."""
 
-    #: csv | wandb | none.
+    #: One of :data:`LOGGER_BACKENDS`.
     backend: str = constrained("csv", choices=LOGGER_BACKENDS)
     #: The wandb project.
     project: str = "temporal-torchrl"
@@ -262,10 +264,9 @@ class LoggerConfig:
 
 @dataclass
 class RecipeConfig:
-    """The whole config of ``recipes/sac_temporal.py`` (``hydra.*`` is Hydra's own, set in
-    ``config.yaml``), beside the defaults list's ``preset`` (none | sac | furl | furl_rho1 | p1..p4
-    | d1..d5 | best ...: ``recipes/preset/*.yaml``) and ``protocol`` (stage1: no preload, TTFS and
-    TT50S | stage2: 50 expert episodes, RAS | furl_paper: FuRL's random-goal protocol)."""
+    """The whole config of ``recipes/sac_temporal.py``; ``config.yaml``'s defaults list adds a
+    ``preset`` and a ``protocol`` (``recipes/preset``, ``recipes/protocol``) and Hydra's own
+    ``hydra.*``."""
 
     env: EnvConfig = field(default_factory=EnvConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)

@@ -20,7 +20,9 @@ from temporal_torchrl.configs.recipe import EncoderConfig, SharedEnvConfig, Shar
 
 @dataclass
 class RewardQualityEnvConfig(SharedEnvConfig):
-    """``env.*``; ``task`` may be a list of task names (one table per task)."""
+    """``env.*``; ``task`` may be a list of task names (one table per task). ``seed`` also
+    draws the held-out split, and ``max_episode_steps`` is the failed episodes' length (the
+    experts get 500 steps to succeed)."""
 
     #: A Metaworld MT50 short name, or a list of them.
     task: Any = "drawer-open"
