@@ -36,7 +36,7 @@ import hydra
 import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl import timeit
@@ -88,7 +88,9 @@ def train(cfg: DictConfig, given_keys: Collection[str] | None = None,
     """
     cfg = validate_recipe_config(cfg)
     run_dir = RunDirectory(run_directory(cfg))
-    with run_dir.lock():  # one writer per run directory, for the whole run
+    # One writer per run directory, for the whole run; its config beside the lock lets a
+    # sweep job tell another config's run from a relaunch of its own.
+    with run_dir.lock(config=OmegaConf.to_container(cfg, resolve=True)):
         return _train(cfg, run_dir, given_keys, on_episode_end or (lambda episode, env_steps: None))
 
 

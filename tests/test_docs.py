@@ -25,6 +25,7 @@ import report
 import torch
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
+from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf, open_dict
 
@@ -136,6 +137,7 @@ def checked(config_name: str, overrides: list[str]):
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
         cfg = compose(config_name, overrides=overrides, return_hydra_config=True)
+    HydraConfig.instance().set_config(cfg)  # as in a run: ${hydra:sweep.dir} resolves
     with open_dict(cfg):
         del cfg["hydra"]
     registered, loaded = set(REWARDS), set(sys.modules)
@@ -144,6 +146,7 @@ def checked(config_name: str, overrides: list[str]):
             patch.setattr(torch.cuda, "is_available", lambda: True)
             return VALIDATE[config_name](cfg)
     finally:  # a command's reward.modules register rewards: the other tests see the built-ins
+        HydraConfig.instance().cfg = None
         for name in set(REWARDS) - registered:
             unregister_reward(name)
         for name in set(sys.modules) - loaded:

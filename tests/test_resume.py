@@ -27,10 +27,12 @@ import sac_temporal
 import torch
 from helpers import QUICK, RECIPES, config
 from helpers import episode_csv_rows as episode_rows
+from omegaconf import OmegaConf
 from torchrl.modules import MLP, ValueOperator
 
 import temporal_torchrl.runs.durable as durable
 from temporal_torchrl.runs import (
+    RunConflictError,
     RunDirectory,
     RunLockedError,
     UnreadableRunFile,
@@ -334,6 +336,47 @@ def test_resume_continues_with_the_saved_config(tmp_path, capsys):
     assert summary["ras"]["budget"] == 400  # door-open's, not drawer-open's 300
     assert summary["config"]["train"]["expert_steps_after_success"] is None
     assert "not using the current values of env.task" in capsys.readouterr().out
+
+
+def test_a_run_of_another_config_in_its_directory_is_refused(tmp_path):
+    # A sweep over a key the directory's name does not tell apart (sac.lr) maps its jobs to one
+    # directory: the second job must fail, naming the key, not continue the first job's run.
+    sac_temporal.train(config(tmp_path, "sac.lr=0.0001", "train.episodes=1"))
+    run_dir = tmp_path / "run"
+    finished = {name: (run_dir / name).read_bytes() for name in ("episodes.csv", "summary.json")}
+    for resume in ("true", "false"):
+        overrides = ["sac.lr=0.0003", f"resume={resume}"]
+        with pytest.raises(RunConflictError, match=(
+                r"asks for sac.lr=0.0003, the run there has sac.lr=0.0001\..*not by sac.lr.*"
+                r"output_dir='\$\{hydra:sweep.dir\}/\$\{env.task\}_lr\$\{sac.lr\}/")):
+            sac_temporal.train(config(tmp_path, *overrides, "train.episodes=1"),
+                               override_keys(overrides))
+    assert {name: (run_dir / name).read_bytes() for name in finished} == finished
+    # What one run may change between its processes is no conflict, nor is a key not given.
+    overrides = ["resume=true", "train.device=cpu", "logger.backend=csv", "train.episodes=1"]
+    summary = sac_temporal.train(config(tmp_path, *overrides, "sac.lr=0.0003"),
+                                 override_keys(overrides))
+    assert summary["config"]["sac"]["lr"] == 0.0001
+    # overwrite=true replaces the run, as asked.
+    overrides = ["sac.lr=0.0003", "overwrite=true", "train.episodes=1"]
+    summary = sac_temporal.train(config(tmp_path, *overrides), override_keys(overrides))
+    assert summary["config"]["sac"]["lr"] == 0.0003
+
+
+def test_a_sweep_job_meeting_another_configs_live_run_fails_and_names_it(tmp_path):
+    # Two jobs of one parallel sweep on one directory: the second finds the first's lock. The
+    # lock keeps the holder's config, so the job fails instead of skipping as it does for a
+    # relaunch of its own run (the same config).
+    from temporal_torchrl.runs.sweep_job import SweepJobFailed, run_sweep_job
+
+    holder, job = (config(tmp_path, f"sac.lr={lr}") for lr in ("0.0001", "0.0003"))
+    run = RunDirectory(tmp_path / "run")
+    with run.lock(config=OmegaConf.to_container(holder, resolve=True)):
+        with pytest.raises(SweepJobFailed) as failure:
+            run_sweep_job(RECIPES / "sac_temporal.py", "run", job, {"sac.lr"}, "#1", run.path)
+    message = str(failure.value)
+    assert "raised RunConflictError" in message and "the live run writing it (pid" in message
+    assert "sac.lr=0.0003, the live run writing it" in message and "Launch the same" not in message
 
 
 def test_resume_changes_only_the_resumable_keys_given(tmp_path, capsys):

@@ -123,9 +123,10 @@ class RunDirectory:
 
     # ------------------------------------------------------------------ the writer's lock
     @contextmanager
-    def lock(self) -> Iterator[None]:
+    def lock(self, config: Mapping[str, Any] | None = None) -> Iterator[None]:
         """Hold the run's lock for the ``with`` block (the whole run): raise
-        :class:`RunLockedError` at once when a live process holds it.
+        :class:`RunLockedError` at once when a live process holds it. ``config``: the config
+        this process runs with, kept beside who holds the lock (:meth:`RunLock.hold`).
 
         A directory this call had to create and that holds nothing else when the block ends (the
         run stopped before writing a file: bad input, nothing to resume) is removed again.
@@ -142,7 +143,7 @@ class RunDirectory:
                     (self.path / name).unlink(missing_ok=True)
 
         try:
-            with self._lock.hold(before_release=remove_lock_files_if_empty):
+            with self._lock.hold(before_release=remove_lock_files_if_empty, config=config):
                 yield
         finally:
             if empty:

@@ -8,7 +8,7 @@ import datetime
 import json
 import os
 import socket
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -26,10 +26,14 @@ class RunLockedError(RuntimeError):
         path: the run directory.
         holder: who holds it, e.g. ``"pid 4242 on host node7 (Slurm job 181), since
             2026-12-01T17:03:12+00:00"``.
+        holder_config: the config the holder runs with, when it gave one to
+            :meth:`RunLock.hold` (None otherwise): a sweep job tells a relaunch of its own run
+            from another config's run with it.
     """
 
     def __init__(self, path: Path, holder: dict[str, Any] | None) -> None:
         self.path, self.holder = path, describe_holder(holder)
+        self.holder_config: dict[str, Any] | None = (holder or {}).get("config")
         if holder is None:
             stop = "stop it"
         elif holder.get("slurm_job_id"):
@@ -65,9 +69,11 @@ class RunLock:
         self.directory = directory
 
     @contextmanager
-    def hold(self, before_release: Callable[[], None] = lambda: None) -> Iterator[None]:
+    def hold(self, before_release: Callable[[], None] = lambda: None,
+             config: Mapping[str, Any] | None = None) -> Iterator[None]:
         """Hold the lock for the ``with`` block: :class:`RunLockedError` at once when a live
-        process holds it. ``before_release`` runs while the lock is still held, at the end."""
+        process holds it. ``before_release`` runs while the lock is still held, at the end;
+        ``config`` (JSON-able), the holder's config, is written beside who holds it."""
         file_lock = FileLock(self.directory / LOCK, timeout=0)
         try:
             file_lock.acquire()
@@ -77,7 +83,8 @@ class RunLock:
             write_json(self.directory / LOCK_HOLDER, {
                 "host": socket.gethostname(), "pid": os.getpid(),
                 "since": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-                "slurm_job_id": os.environ.get("SLURM_JOB_ID")})
+                "slurm_job_id": os.environ.get("SLURM_JOB_ID"),
+                **({"config": dict(config)} if config is not None else {})})
             yield
         finally:
             try:

@@ -78,6 +78,62 @@ RESUMABLE_KEYS = ("train.episodes", "train.checkpoint_every", "compile.enabled",
 DEVICE_KEYS = ("encoder.device", "train.device", "replay_buffer.device")
 
 
+class RunConflictError(ValueError):
+    """A run asked for values that differ from those of the run already in its directory.
+
+    A run directory holds one run, named by what presets and protocols change (task, encoder,
+    reward, rho, lambda, baseline, protocol, seed), so two runs that differ only in another key
+    (``sac.lr``, ``reward.alpha``, ...) map to one directory: the second would resume the first
+    instead of running. ``conflicts`` maps each such key to (asked for, in the directory).
+    """
+
+    def __init__(self, path: Path, conflicts: dict[str, tuple[Any, Any]],
+                 other: str = "the run there") -> None:
+        self.path, self.conflicts = path, conflicts
+        asked = ", ".join(f"{key}={value!r}" for key, (value, _) in conflicts.items())
+        theirs = ", ".join(f"{key}={value!r}" for key, (_, value) in conflicts.items())
+        keys = "".join(f"_{key.rsplit('.', 1)[-1]}${{{key}}}" for key in conflicts)
+        super().__init__(
+            f"{path} holds another config's run: this run asks for {asked}, {other} has "
+            f"{theirs}. A run directory's name tells runs apart by task, encoder, reward, rho, "
+            f"lambda, baseline, protocol and seed, not by {', '.join(conflicts)}, so this run "
+            "would continue that one instead of running. Give each value a directory of its "
+            f"own: output_dir='${{hydra:sweep.dir}}/${{env.task}}{keys}/seed${{env.seed}}' in a "
+            "sweep, output_dir=<a new directory> for a single run.")
+
+
+def _is_given(key: str, given_keys: Collection[str]) -> bool:
+    """Whether the flattened config ``key`` was set by one of ``given_keys`` (itself, a group
+    above it, or a key inside it)."""
+    return any(key == given or key.startswith(f"{given}.") or given.startswith(f"{key}.")
+               for given in given_keys)
+
+
+def check_no_conflict(cfg: DictConfig, run: RunDirectory,
+                      given_keys: Collection[str] | None) -> None:
+    """Raise :class:`RunConflictError` when ``run`` holds a run whose config differs from
+    ``cfg`` in a key set on the command line (``given_keys``; None, a config built in code,
+    checks nothing): resuming or replacing it would not run what was asked for."""
+    if cfg.overwrite or given_keys is None or not (run.path / CONFIG_FILE).is_file():
+        return
+    conflicts = conflicting_values(cfg, run.config(), given_keys)
+    if conflicts:
+        raise RunConflictError(run.path, conflicts)
+
+
+def conflicting_values(cfg: DictConfig, other: dict[str, Any],
+                       given_keys: Collection[str]) -> dict[str, tuple[Any, Any]]:
+    """The keys of ``given_keys`` whose values in ``cfg`` differ from those in the config
+    ``other``, except the keys one run may change between its processes (process, resumable,
+    device and logger keys): ``{key: (cfg's value, other's value)}``."""
+    ours = flatten(OmegaConf.to_container(cfg, resolve=True))
+    theirs = flatten(other)
+    return {key: (value, theirs[key]) for key, value in ours.items()
+            if key in theirs and theirs[key] != value and _is_given(key, given_keys)
+            and key not in (*PROCESS_KEYS, *RESUMABLE_KEYS, *DEVICE_KEYS)
+            and not key.startswith("logger.")}
+
+
 def override_keys(overrides: Sequence[str]) -> set[str]:
     """The config keys that command-line overrides set (``+``, ``++`` and ``~`` dropped)."""
     return {override.split("=", 1)[0].lstrip("+~") for override in overrides}

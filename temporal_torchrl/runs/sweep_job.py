@@ -29,13 +29,17 @@ import tempfile
 import traceback
 from collections.abc import Collection, Sequence
 from pathlib import Path
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
 from temporal_torchrl.runs.lock import RunLockedError
+from temporal_torchrl.runs.resume import RunConflictError, conflicting_values
 
 #: The child's exit status when it left the run to the live process that holds its lock.
 _SKIPPED = 3
+#: What a job killed or failed in the middle of its run does next.
+_RESUME = "Launch the same command again to resume it from its last checkpoint."
 
 
 class SweepJobFailed(RuntimeError):
@@ -74,11 +78,11 @@ def run_sweep_job(script: str | Path, function: str, cfg: DictConfig,
         returncode = subprocess.run([sys.executable, "-m", __name__, str(job_file)]).returncode
         if returncode in (0, _SKIPPED):
             return
-        reason = describe_exit(returncode)
-        if result_file.exists():
-            reason = json.loads(result_file.read_text())["error"]
-    message = (f"sweep job {job} died: {reason}. Its run directory: {run_dir}. Launch the same "
-               "command again to resume it from its last checkpoint.")
+        failure = json.loads(result_file.read_text()) if result_file.exists() else {}
+    reason = failure.get("error", describe_exit(returncode)).rstrip(".")
+    remedy = failure.get("remedy", _RESUME)
+    message = f"sweep job {job} died: {reason}. Its run directory: {run_dir}." + (
+        f" {remedy}" if remedy else "")
     print(message, flush=True)
     raise SweepJobFailed(message)
 
@@ -99,15 +103,27 @@ def _child(argv: Sequence[str]) -> int:
     function = runpy.run_path(job["script"], run_name="sweep_job")[job["function"]]
     try:
         function(OmegaConf.create(job["config"]), set(job["given_keys"]))
-    except RunLockedError as error:
-        print(error.skip_line(), flush=True)  # the other jobs of the sweep go on
-        return _SKIPPED
+    except RunLockedError as locked:
+        conflicts = conflicting_values(OmegaConf.create(job["config"]),
+                                       locked.holder_config or {}, job["given_keys"])
+        if not conflicts:  # a relaunch of this job's own run: the other jobs of the sweep go on
+            print(locked.skip_line(), flush=True)
+            return _SKIPPED
+        return _failed(job, RunConflictError(locked.path, conflicts,
+                                             f"the live run writing it ({locked.holder})"), "")
+    except RunConflictError as error:  # its message says what to do; a relaunch would not help
+        return _failed(job, error, "")
     except BaseException as error:  # noqa: BLE001 (whatever it is, the parent must name it)
         traceback.print_exc()
-        summary = f"{type(error).__name__}: {error}".splitlines()[0]
-        Path(job["result"]).write_text(json.dumps({"error": f"raised {summary}"}))
-        return 1
+        return _failed(job, error, _RESUME)
     return 0
+
+
+def _failed(job: dict[str, Any], error: BaseException, remedy: str) -> int:
+    """Leave the parent the error's first line and what to do about it; the child's status."""
+    summary = f"{type(error).__name__}: {error}".splitlines()[0]
+    Path(job["result"]).write_text(json.dumps({"error": f"raised {summary}", "remedy": remedy}))
+    return 1
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ from tensordict import TensorDictBase
 
 from temporal_torchrl.configs.rules import validate_recipe_config
 from temporal_torchrl.data import EpisodeReplayBuffer
-from temporal_torchrl.runs import Checkpoint, RunDirectory, resumed_config
+from temporal_torchrl.runs import Checkpoint, RunDirectory, check_no_conflict, resumed_config
 from temporal_torchrl.training.state import (
     TrainingProgress,
     TrainingState,
@@ -81,6 +81,7 @@ def start_run(run: RunDirectory, cfg: DictConfig,
     """Decide how the run in ``run`` (whose lock the caller holds) starts (see the module doc).
     ``given_keys``: the keys set on the command line, which alone may change a resumed run's
     resumable keys (None: all of ``cfg``'s do)."""
+    check_no_conflict(cfg, run, given_keys)
     run.check(resume=cfg.resume, overwrite=cfg.overwrite)
     if not cfg.resume:
         return RunStart(run, cfg, None)
