@@ -1,5 +1,6 @@
-"""Continuing a run: the config it resumes with, the keys a process may change, sweep jobs that
-resume their runs, and positives one run gives another."""
+"""Continuing a run: the config it resumes with, the keys a process may change, the other
+config's run it must not continue, sweep jobs that resume their runs, and positives one run
+gives another."""
 
 from __future__ import annotations
 
