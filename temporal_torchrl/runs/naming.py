@@ -10,6 +10,9 @@ from omegaconf import DictConfig
 from temporal_torchrl.rewards.config import uses_vlm_reward
 from temporal_torchrl.runs.layout import protocol_name
 
+#: What a default run directory's name tells runs apart by (:func:`default_run_dir`).
+NAMED_BY = "task, encoder, reward, rho, lambda, baseline, protocol and seed"
+
 
 def default_run_dir(cfg: DictConfig) -> Path:
     """``runs/<task>/<encoder>_<positional>+<directional>_rho<r>_lambda<l>_<baseline>_<protocol>

@@ -16,7 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 from temporal_torchrl.rewards.config import uses_vlm_reward
 from temporal_torchrl.runs.directory import RunDirectory
 from temporal_torchrl.runs.layout import CONFIG_FILE, SUMMARY_FILE, flatten
-from temporal_torchrl.runs.naming import run_directory
+from temporal_torchrl.runs.naming import NAMED_BY, run_directory
 
 
 def sweep_job_config(cfg: DictConfig, hydra_config: DictConfig) -> DictConfig | None:
@@ -96,8 +96,8 @@ class RunConflictError(ValueError):
         keys = "".join(f"_{key.rsplit('.', 1)[-1]}${{{key}}}" for key in conflicts)
         super().__init__(
             f"{path} holds another config's run: this run asks for {asked}, {other} has "
-            f"{theirs}. A run directory's name tells runs apart by task, encoder, reward, rho, "
-            f"lambda, baseline, protocol and seed, not by {', '.join(conflicts)}, so this run "
+            f"{theirs}. A run directory's name tells runs apart by {NAMED_BY}, not by "
+            f"{', '.join(conflicts)}, so this run "
             "would continue that one instead of running. Give each value a directory of its "
             f"own: output_dir='${{hydra:sweep.dir}}/${{env.task}}{keys}/seed${{env.seed}}' in a "
             "sweep, output_dir=<a new directory> for a single run.")
