@@ -20,6 +20,10 @@ and writes into ``--out``:
   CI, computed with rliable
   (:mod:`temporal_torchrl.reports.reliable`; scores: RAS / 100, and 1 - TTFS / 1000 with
   runs that have not reached the success scored 0);
+- ``comparisons.md``/``.csv``: each pair of configurations above (X over the baseline, each
+  ``--compare X Y``) on each task both ran: the difference of their mean RAS with Welch's 95%
+  interval, p-value and Bonferroni interval over all these comparisons, and the run pairs X won
+  (:mod:`temporal_torchrl.reports.task_comparison`);
 - ``aggregate_<metric>.png`` (IQM and mean with their CIs), ``performance_profiles.png``
   (fraction of runs above each score, with CI bands) and ``probability_of_improvement.png``,
   drawn with ``rliable.plot_utils``;
@@ -79,14 +83,18 @@ from temporal_torchrl.reports.tables import (
     CSV_COLUMNS,
     RELIABLE_COLUMNS,
     RUN_COLUMNS,
+    TASK_COMPARISON_COLUMNS,
     grouping_markdown,
     reliable_markdown,
     reliable_rows,
     run_rows,
     table_markdown,
     table_rows,
+    task_comparison_markdown,
+    task_comparison_rows,
     write_csv,
 )
+from temporal_torchrl.reports.task_comparison import compare_configurations
 from temporal_torchrl.reports.thesis_table import (
     THESIS_TABLE_COLUMNS,
     build_thesis_table,
@@ -243,6 +251,15 @@ def main(argv: list[str] | None = None) -> None:
     sections.append(aggregates)
     print(aggregates)
 
+    comparisons = compare_configurations(reliable[list(METRICS).index("ras")])
+    if comparisons:
+        markdown = task_comparison_markdown(comparisons)
+        (args.out / "comparisons.md").write_text(markdown)
+        write_csv(args.out / "comparisons.csv", task_comparison_rows(comparisons),
+                  TASK_COMPARISON_COLUMNS)
+        sections.append(markdown)
+        print(markdown)
+
     # Only runs that evaluated (eval.csv) make this section: without any, nothing is said.
     evaluation = build_evaluation_table(groups, ras=tables["ras"],
                                         ras_reliable=reliable[list(METRICS).index("ras")],
@@ -291,7 +308,8 @@ def main(argv: list[str] | None = None) -> None:
     sections.append("\n\n".join(figures) + "\n")
     (args.out / "report.md").write_text("\n".join(sections))
     print(f"wrote {args.out}: report.md, {', '.join(f'{m}.md/.csv' for m in METRICS)}, "
-          "aggregates.md/.csv, runs.csv and the figures")
+          "aggregates.md/.csv, "
+          f"{'comparisons.md/.csv, ' if comparisons else ''}runs.csv and the figures")
 
 
 if __name__ == "__main__":

@@ -558,7 +558,16 @@ def test_report_cli_end_to_end(tmp_path, real_run):
     assert float(aggregates["ttfs", "SAC"]["iqm"]) == 0.0
     assert float(aggregates["ras", "FuRL ρ=0.05"]["mean"]) == pytest.approx(
         ((1.0 + 70 / 150) / 2 + 1.0) / 2)  # drawer-open's 2 complete runs, door-open's 1
+    with (out / "comparisons.csv").open() as file:
+        comparisons = list(csv.DictReader(file))
+    # SAC's one run has no seed error: the difference is given, no interval
+    assert [(row["configuration"], row["baseline"], row["task"], row["n"], row["baseline_n"],
+             row["difference_ci95_low"], row["pairs_won"], row["reading"])
+            for row in comparisons] == [
+        ("FuRL ρ=0.05", "SAC", "drawer-open", "2", "1", "", "2",
+         "not resolved (a single run has no seed error)")]
     report_md = (out / "report.md").read_text()
+    assert "## RAS (%): configurations compared on each task" in report_md
     assert "## Over tasks and seeds (rliable)" in report_md
     assert "(on 1 of its 2 tasks)" in report_md
     assert "![performance profiles](performance_profiles.png)" in report_md

@@ -11,6 +11,8 @@
   to run configurations.
 - :mod:`~temporal_torchrl.reports.thesis_comparison`: a cell or an average against the thesis's,
   its seed error counted: the difference's interval and what it lets us say.
+- :mod:`~temporal_torchrl.reports.task_comparison`: two configurations on one task: the
+  difference of their RAS with its interval, p-value and the run pairs won.
 - :mod:`~temporal_torchrl.reports.thesis_table`: the runs laid out as one of the thesis's tables,
   ours beside it in every cell (``report.py --thesis-table``).
 - :mod:`~temporal_torchrl.reports.evaluation`: the runs' periodic evaluations of the
@@ -57,6 +59,7 @@ from temporal_torchrl.reports.reliable import (
     run_score,
 )
 from temporal_torchrl.reports.reward_curves import EpisodeRewards, reward_curves
+from temporal_torchrl.reports.task_comparison import TaskComparison, compare_configurations
 from temporal_torchrl.reports.thesis_comparison import (
     ThesisComparison,
     compare_averages,
@@ -81,6 +84,7 @@ __all__ = [
     "RunValue",
     "Scores",
     "Series",
+    "TaskComparison",
     "ThesisComparison",
     "ThesisTablePage",
     "aggregate_intervals",
@@ -88,6 +92,7 @@ __all__ = [
     "build_table",
     "build_thesis_table",
     "compare_averages",
+    "compare_configurations",
     "compare_with_thesis",
     "configuration_scores",
     "find_published",

@@ -13,6 +13,10 @@ configuration matches.
 :class:`~temporal_torchrl.reports.reliable.ReliableTable` (:func:`reliable_markdown`,
 :func:`reliable_rows`): one row per configuration, its IQM and mean of normalised scores over
 tasks and seeds and its probability of improvement over the baseline, each with its 95% CI.
+
+:class:`~temporal_torchrl.reports.task_comparison.TaskComparison`
+(:func:`task_comparison_markdown`, :func:`task_comparison_rows`): one row per pair of
+configurations and task, the difference of their RAS with its intervals and the run pairs won.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from temporal_torchrl.reports.reliable import (
     Scores,
     score_rule,
 )
+from temporal_torchrl.reports.task_comparison import TaskComparison
 from temporal_torchrl.reports.thesis_comparison import ThesisComparison
 from temporal_torchrl.rewards.config import has_vlm_reward
 
@@ -50,6 +55,10 @@ RELIABLE_COLUMNS = ("metric", "configuration", "tasks", "runs_scored", "censored
                     "unscored", "iqm", "iqm_ci95_low", "iqm_ci95_high", "mean", "mean_ci95_low",
                     "mean_ci95_high", "baseline", "p_improvement", "p_improvement_ci95_low",
                     "p_improvement_ci95_high", "p_improvement_tasks", "note")
+TASK_COMPARISON_COLUMNS = ("configuration", "baseline", "task", "n", "baseline_n", "difference",
+                           "difference_ci95_low", "difference_ci95_high", "p_value",
+                           "comparisons", "difference_adjusted_low",
+                           "difference_adjusted_high", "pairs_won", "pairs", "reading")
 RUN_COLUMNS = ("configuration", "task", "seed", "episodes", "finished", *METRICS, "path")
 EMPTY_CELL = "—"
 
@@ -460,3 +469,45 @@ def reliable_rows(table: ReliableTable) -> list[dict[str, str]]:
             "p_improvement_tasks": " ".join(improvement.tasks) if improvement else "",
             "note": note or ""})
     return rows
+
+
+def _pairs_won_text(comparison: TaskComparison) -> str:
+    won = comparison.pairs_won
+    return f"{won:g} of {comparison.pairs}"
+
+
+def task_comparison_markdown(comparisons: Sequence[TaskComparison]) -> str:
+    """The per-task comparisons of configurations, explained (empty when there is none)."""
+    if not comparisons:
+        return ""
+    rows = [[f"{each.label} − {each.baseline}", each.task,
+             f"{len(each.values)} · {len(each.baseline_values)}", each.describe(),
+             _pairs_won_text(each)] for each in comparisons]
+    m = comparisons[0].comparisons
+    return "\n".join([
+        "## RAS (%): configurations compared on each task", "",
+        markdown_table(["Comparison (X − Y)", "Task", "Runs (X · Y)",
+                        "Δ [95% CI], p: reading", "Run pairs X won"], rows), "",
+        "Δ: X's mean RAS minus Y's, from unrounded means, with Welch's 95% interval and "
+        f"two-sided p (no equal-spread assumption). *above* / *below*: the interval at the "
+        f"Bonferroni level over the {m} comparisons of this table (shown after it) excludes 0; "
+        f"*not resolved over {m}*: only the 95% interval does; *not resolved*: the 95% "
+        "interval includes 0. Run pairs X won: of the pairs of a run of X and a run of Y on the "
+        "task, those where X's RAS is higher (ties count half), rliable's P(X > Y) on this task "
+        "times the number of pairs; all of them won is what these runs show, not certainty.",
+        ""])
+
+
+def task_comparison_rows(comparisons: Sequence[TaskComparison]) -> list[dict[str, str]]:
+    """The CSV rows of ``comparisons`` (:data:`TASK_COMPARISON_COLUMNS`)."""
+    return [{"configuration": each.label, "baseline": each.baseline, "task": each.task,
+             "n": str(len(each.values)), "baseline_n": str(len(each.baseline_values)),
+             "difference": _optional(each.difference),
+             "difference_ci95_low": _optional(each.low),
+             "difference_ci95_high": _optional(each.high),
+             "p_value": _optional(each.p_value), "comparisons": str(each.comparisons),
+             "difference_adjusted_low": _optional(each.adjusted_low),
+             "difference_adjusted_high": _optional(each.adjusted_high),
+             "pairs_won": f"{each.pairs_won:g}", "pairs": str(each.pairs),
+             "reading": each.verdict if each.reason is None
+             else f"{each.verdict} ({each.reason})"} for each in comparisons]
