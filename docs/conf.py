@@ -61,6 +61,7 @@ exclude_patterns = [
     "results/*/ttfs.md",
     "results/*/tt50s.md",
     "results/*/aggregates.md",
+    "results/*/comparisons.md",
     "results/*/evaluation.md",
     "results/*/table_*.md",
 ]
