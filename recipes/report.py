@@ -51,6 +51,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+from collections.abc import Sequence
 from pathlib import Path
 
 from temporal_torchrl.reports import (
@@ -191,6 +192,15 @@ def metric_file(key: str) -> str:
     return "metric_" + re.sub(r"[^A-Za-z0-9_.]+", "-", key).strip("-") + ".png"
 
 
+def write_table(out: Path, name: str, markdown: str, rows: list[dict[str, str]],
+                columns: Sequence[str]) -> str:
+    """``name``.md and ``name``.csv in ``out``; the Markdown printed and returned."""
+    (out / f"{name}.md").write_text(markdown)
+    write_csv(out / f"{name}.csv", rows, columns)
+    print(markdown)
+    return markdown
+
+
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     groups = group_runs(find_runs(args.dirs))
@@ -224,53 +234,38 @@ def main(argv: list[str] | None = None) -> None:
     print(grouping_markdown(groups))
     if page is not None:
         name = "table_" + page.table.number.replace(".", "_")
-        markdown = thesis_table_markdown(page)
-        (args.out / f"{name}.md").write_text(markdown)
-        write_csv(args.out / f"{name}.csv", thesis_table_rows(page), THESIS_TABLE_COLUMNS)
+        markdown = write_table(args.out, name, thesis_table_markdown(page),
+                               thesis_table_rows(page), THESIS_TABLE_COLUMNS)
         sections.insert(4, markdown)  # the report leads with it, before how to read it
-        print(markdown)
 
     tables = {}
     for metric in METRICS:
         table = tables[metric] = build_table(groups, metric)
-        markdown = table_markdown(table)
-        (args.out / f"{metric}.md").write_text(markdown)
-        write_csv(args.out / f"{metric}.csv", table_rows(table), CSV_COLUMNS)
-        sections.append(markdown)
-        print(markdown)
+        sections.append(write_table(args.out, metric, table_markdown(table), table_rows(table),
+                                    CSV_COLUMNS))
     write_csv(args.out / "runs.csv", run_rows(groups, args.dirs), RUN_COLUMNS)
 
     reliable = [build_reliable_table(groups, metric, baseline=baseline, reps=args.bootstrap,
                                      seed=args.seed, pairs=[tuple(pair) for pair in args.compare])
                 for metric in METRICS]
-    aggregates = "\n".join(["## Over tasks and seeds (rliable)", "",
-                            *map(reliable_markdown, reliable)])
-    (args.out / "aggregates.md").write_text(aggregates)
-    write_csv(args.out / "aggregates.csv",
-              [row for table in reliable for row in reliable_rows(table)], RELIABLE_COLUMNS)
-    sections.append(aggregates)
-    print(aggregates)
+    ras_reliable = reliable[list(METRICS).index("ras")]
+    sections.append(write_table(
+        args.out, "aggregates",
+        "\n".join(["## Over tasks and seeds (rliable)", "", *map(reliable_markdown, reliable)]),
+        [row for table in reliable for row in reliable_rows(table)], RELIABLE_COLUMNS))
 
-    comparisons = compare_configurations(reliable[list(METRICS).index("ras")])
+    comparisons = compare_configurations(ras_reliable)
     if comparisons:
-        markdown = task_comparison_markdown(comparisons)
-        (args.out / "comparisons.md").write_text(markdown)
-        write_csv(args.out / "comparisons.csv", task_comparison_rows(comparisons),
-                  TASK_COMPARISON_COLUMNS)
-        sections.append(markdown)
-        print(markdown)
+        sections.append(write_table(args.out, "comparisons",
+                                    task_comparison_markdown(comparisons),
+                                    task_comparison_rows(comparisons), TASK_COMPARISON_COLUMNS))
 
     # Only runs that evaluated (eval.csv) make this section: without any, nothing is said.
-    evaluation = build_evaluation_table(groups, ras=tables["ras"],
-                                        ras_reliable=reliable[list(METRICS).index("ras")],
+    evaluation = build_evaluation_table(groups, ras=tables["ras"], ras_reliable=ras_reliable,
                                         reps=args.bootstrap, seed=args.seed)
     if evaluation is not None:
-        markdown = evaluation_markdown(evaluation)
-        (args.out / "evaluation.md").write_text(markdown)
-        write_csv(args.out / "evaluation.csv", evaluation_rows(evaluation),
-                  EVALUATION_TABLE_COLUMNS)
-        sections.append(markdown)
-        print(markdown)
+        sections.append(write_table(args.out, "evaluation", evaluation_markdown(evaluation),
+                                    evaluation_rows(evaluation), EVALUATION_TABLE_COLUMNS))
 
     figures = ["## Figures"]
     colours = configuration_colours(labels)

@@ -471,18 +471,13 @@ def reliable_rows(table: ReliableTable) -> list[dict[str, str]]:
     return rows
 
 
-def _pairs_won_text(comparison: TaskComparison) -> str:
-    won = comparison.pairs_won
-    return f"{won:g} of {comparison.pairs}"
-
-
 def task_comparison_markdown(comparisons: Sequence[TaskComparison]) -> str:
     """The per-task comparisons of configurations, explained (empty when there is none)."""
     if not comparisons:
         return ""
     rows = [[f"{each.label} − {each.baseline}", each.task,
              f"{len(each.values)} · {len(each.baseline_values)}", each.describe(),
-             _pairs_won_text(each)] for each in comparisons]
+             f"{each.pairs_won:g} of {each.pairs}"] for each in comparisons]
     m = comparisons[0].comparisons
     return "\n".join([
         "## RAS (%): configurations compared on each task", "",

@@ -57,11 +57,11 @@ class TaskComparison:
         task: the task.
         values, baseline_values: their runs' RAS (%).
         difference: mean of ``values`` minus mean of ``baseline_values``.
+        comparisons: m, the Bonferroni factor.
+        pairs_won: the run pairs where X scored more, ties counting half.
         low, high: its 95% interval; None (with ``reason``) when there is no seed error.
         adjusted_low, adjusted_high: its interval at level 1 - 0.05 / ``comparisons``.
         p_value: Welch's two-sided p; None with the interval.
-        comparisons: m, the Bonferroni factor.
-        pairs_won: the run pairs where X scored more, ties counting half.
         reason: why there is no interval.
     """
 
@@ -71,13 +71,13 @@ class TaskComparison:
     values: tuple[float, ...]
     baseline_values: tuple[float, ...]
     difference: float
-    low: float | None
-    high: float | None
-    adjusted_low: float | None
-    adjusted_high: float | None
-    p_value: float | None
     comparisons: int
     pairs_won: float
+    low: float | None = None
+    high: float | None = None
+    adjusted_low: float | None = None
+    adjusted_high: float | None = None
+    p_value: float | None = None
     reason: str | None = None
 
     @property
@@ -102,14 +102,14 @@ class TaskComparison:
             return f"{signed(self.difference)}: {NOT_RESOLVED} ({self.reason})"
         text = (f"{signed(self.difference)} [{signed(self.low)}, {signed(self.high)}], "
                 f"p = {self.p_value:.4f}: ")
-        adjusted = f"[{signed(self.adjusted_low)}, {signed(self.adjusted_high)}]"
         verdict = self.verdict
         if verdict == NOT_RESOLVED:
             return text + verdict
-        if verdict.startswith(NOT_RESOLVED):
-            direction = "above" if self.difference > 0 else "below"
-            return text + f"{direction} at 95%, {verdict} {adjusted}"
-        return text + f"{verdict} over {self.comparisons} {adjusted}"
+        adjusted = f"[{signed(self.adjusted_low)}, {signed(self.adjusted_high)}]"
+        direction = ABOVE if self.difference > 0 else BELOW
+        if verdict == direction:
+            return text + f"{direction} over {self.comparisons} {adjusted}"
+        return text + f"{direction} at 95%, {verdict} {adjusted}"
 
 
 def pairs_won(values: Sequence[float], baseline_values: Sequence[float]) -> float:
@@ -130,22 +130,20 @@ def compare_on_task(label: str, baseline: str, task: str, values: Sequence[float
         raise ValueError(f"{task}: {label} has {len(values)} run(s) and {baseline} "
                          f"{len(baseline_values)}; both need at least one.")
     x, y = np.asarray(values, dtype=float), np.asarray(baseline_values, dtype=float)
-    difference = float(x.mean() - y.mean())
-    won = pairs_won(x, y)
-    common = (label, baseline, task, tuple(map(float, x)), tuple(map(float, y)), difference)
-    reason = None
+    runs = {"label": label, "baseline": baseline, "task": task,
+            "values": tuple(map(float, x)), "baseline_values": tuple(map(float, y)),
+            "difference": float(x.mean() - y.mean()), "comparisons": comparisons,
+            "pairs_won": pairs_won(x, y)}
     if min(len(x), len(y)) < 2:
-        reason = "a single run has no seed error"
-    elif x.std() == 0.0 and y.std() == 0.0:
-        reason = "every run of each scored the same"
-    if reason is not None:
-        return TaskComparison(*common, None, None, None, None, None, comparisons, won, reason)
+        return TaskComparison(**runs, reason="a single run has no seed error")
+    if x.std() == 0.0 and y.std() == 0.0:
+        return TaskComparison(**runs, reason="every run of each scored the same")
     test = stats.ttest_ind(x, y, equal_var=False)
     interval = test.confidence_interval(level)
     adjusted = test.confidence_interval(1 - (1 - level) / comparisons)
-    return TaskComparison(*common, float(interval.low), float(interval.high),
-                          float(adjusted.low), float(adjusted.high), float(test.pvalue),
-                          comparisons, won)
+    return TaskComparison(**runs, low=float(interval.low), high=float(interval.high),
+                          adjusted_low=float(adjusted.low), adjusted_high=float(adjusted.high),
+                          p_value=float(test.pvalue))
 
 
 def compared_pairs(table: ReliableTable) -> list[tuple[str, str]]:
