@@ -3,9 +3,11 @@ over the old one, and the rename flushed too, so a reader finds the old file or 
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -43,3 +45,27 @@ def write_file(path: Path, write: Callable[[IO[bytes]], None]) -> None:
 def write_json(path: str | Path, payload: Mapping[str, Any]) -> None:
     """``payload`` as indented JSON, written whole (:func:`write_file`)."""
     write_file(Path(path), lambda file: file.write((json.dumps(payload, indent=2) + "\n").encode()))
+
+
+def append_csv_row(path: Path, columns: Sequence[str], row: Mapping[str, Any]) -> None:
+    """Append ``row`` to the CSV file at ``path`` (its header first when the file is new),
+    flushed to disk before returning, so that a kill loses at most the row being written."""
+    new = not path.exists()
+    with path.open("a", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=columns)
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+        flush_to_disk(file)
+    if new:
+        fsync_directory(path.parent)
+
+
+def write_csv(path: Path, columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> None:
+    """Replace the CSV file at ``path`` with ``columns``' header and ``rows``, written whole
+    (:func:`write_file`)."""
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=columns)
+    writer.writeheader()
+    writer.writerows(rows)
+    write_file(path, lambda file: file.write(text.getvalue().encode()))

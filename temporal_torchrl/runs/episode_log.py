@@ -5,12 +5,11 @@ reports both apply."""
 from __future__ import annotations
 
 import csv
-import io
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from temporal_torchrl.runs.checkpoint import START_OVER, UnreadableRunFile
-from temporal_torchrl.runs.durable import flush_to_disk, fsync_directory, write_file
+from temporal_torchrl.runs.durable import append_csv_row, write_csv
 from temporal_torchrl.runs.layout import EPISODE_COLUMNS
 
 
@@ -21,15 +20,7 @@ class EpisodeLog:
         self.path = path
 
     def append(self, row: dict[str, Any]) -> None:
-        new = not self.path.exists()
-        with self.path.open("a", newline="") as file:
-            writer = csv.DictWriter(file, fieldnames=EPISODE_COLUMNS)
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
-            flush_to_disk(file)
-        if new:
-            fsync_directory(self.path.parent)
+        append_csv_row(self.path, EPISODE_COLUMNS, row)
 
     def rows(self) -> list[dict[str, str]]:
         if not self.path.exists():
@@ -79,7 +70,7 @@ class EpisodeLog:
                 f"again, or {START_OVER}.")
         if len(rows) == episodes and self.path.exists():
             return
-        write_file(self.path, lambda file: _write_rows(file, rows[:episodes]))
+        write_csv(self.path, EPISODE_COLUMNS, rows[:episodes])
 
 
 def row_problem(row: dict[str | None, Any], number: int) -> str | None:
@@ -99,10 +90,3 @@ def row_problem(row: dict[str | None, Any], number: int) -> str | None:
         return f"success is {row['success']!r}, not 0 or 1"
     return None
 
-
-def _write_rows(file: IO[bytes], rows: list[dict[str, str]]) -> None:
-    text = io.StringIO(newline="")
-    writer = csv.DictWriter(text, fieldnames=EPISODE_COLUMNS)
-    writer.writeheader()
-    writer.writerows(rows)
-    file.write(text.getvalue().encode())

@@ -4,12 +4,11 @@ appended and flushed to disk as each evaluation ends."""
 from __future__ import annotations
 
 import csv
-import io
 import math
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
-from temporal_torchrl.runs.durable import flush_to_disk, fsync_directory, write_file
+from temporal_torchrl.runs.durable import append_csv_row, write_csv
 from temporal_torchrl.runs.layout import EVALUATION_COLUMNS
 
 
@@ -23,15 +22,7 @@ class EvaluationLog:
         self.path = path
 
     def append(self, row: dict[str, Any]) -> None:
-        new = not self.path.exists()
-        with self.path.open("a", newline="") as file:
-            writer = csv.DictWriter(file, fieldnames=EVALUATION_COLUMNS)
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
-            flush_to_disk(file)
-        if new:
-            fsync_directory(self.path.parent)
+        append_csv_row(self.path, EVALUATION_COLUMNS, row)
 
     def rows(self) -> list[dict[str, float]]:
         """The evaluations so far, values as numbers; a ``ValueError`` naming a bad line."""
@@ -60,7 +51,7 @@ class EvaluationLog:
             rows = list(csv.DictReader(file))
         kept = [row for row in rows if float(row["episode"]) <= episodes]
         if len(kept) < len(rows):
-            write_file(self.path, lambda file: _write_rows(file, kept))
+            write_csv(self.path, EVALUATION_COLUMNS, kept)
 
 
 def evaluation_summary(rows: list[dict[str, float]]) -> dict[str, Any] | None:
@@ -76,10 +67,3 @@ def evaluation_summary(rows: list[dict[str, float]]) -> dict[str, Any] | None:
             "best_episode": int(best["episode"]),
             "last_final_success_rate": rows[-1]["final_success_rate"]}
 
-
-def _write_rows(file: IO[bytes], rows: list[dict[str, str]]) -> None:
-    text = io.StringIO(newline="")
-    writer = csv.DictWriter(text, fieldnames=EVALUATION_COLUMNS)
-    writer.writeheader()
-    writer.writerows(rows)
-    file.write(text.getvalue().encode())
