@@ -93,7 +93,6 @@ from temporal_torchrl.reports.tables import (
     table_rows,
     task_comparison_markdown,
     task_comparison_rows,
-    write_csv,
 )
 from temporal_torchrl.reports.task_comparison import compare_configurations
 from temporal_torchrl.reports.thesis_table import (
@@ -103,6 +102,7 @@ from temporal_torchrl.reports.thesis_table import (
     thesis_table_rows,
 )
 from temporal_torchrl.runs import find_runs, load_run
+from temporal_torchrl.runs.durable import write_csv
 
 HOW_TO_READ = """\
 ## How to read this report

@@ -21,7 +21,6 @@ configurations and task, the difference of their RAS with its intervals and the 
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -293,13 +292,6 @@ def relative_run_path(path: Path, roots: Sequence[Path]) -> str:
             prefix = root.relative_to(here).as_posix() if here in root.parents else root.name
             return f"{prefix}/{relative}"
     return Path(*resolved.parts[-3:]).as_posix()
-
-
-def write_csv(path: Path, rows: Sequence[dict[str, str]], columns: Sequence[str]) -> None:
-    with path.open("w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=columns)
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 def run_rows(groups: Sequence[RunGroup], roots: Sequence[Path]) -> list[dict[str, str]]:

@@ -61,8 +61,8 @@ def append_csv_row(path: Path, columns: Sequence[str], row: Mapping[str, Any]) -
         fsync_directory(path.parent)
 
 
-def write_csv(path: Path, columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> None:
-    """Replace the CSV file at ``path`` with ``columns``' header and ``rows``, written whole
+def write_csv(path: Path, rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> None:
+    """The CSV file at ``path``: ``columns``' header, then ``rows``, written whole
     (:func:`write_file`)."""
     text = io.StringIO(newline="")
     writer = csv.DictWriter(text, fieldnames=columns)

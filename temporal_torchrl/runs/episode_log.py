@@ -70,7 +70,7 @@ class EpisodeLog:
                 f"again, or {START_OVER}.")
         if len(rows) == episodes and self.path.exists():
             return
-        write_csv(self.path, EPISODE_COLUMNS, rows[:episodes])
+        write_csv(self.path, rows[:episodes], EPISODE_COLUMNS)
 
 
 def row_problem(row: dict[str | None, Any], number: int) -> str | None:

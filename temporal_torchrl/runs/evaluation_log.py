@@ -51,7 +51,7 @@ class EvaluationLog:
             rows = list(csv.DictReader(file))
         kept = [row for row in rows if float(row["episode"]) <= episodes]
         if len(kept) < len(rows):
-            write_csv(self.path, EVALUATION_COLUMNS, kept)
+            write_csv(self.path, kept, EVALUATION_COLUMNS)
 
 
 def evaluation_summary(rows: list[dict[str, float]]) -> dict[str, Any] | None:
