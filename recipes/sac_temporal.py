@@ -18,10 +18,12 @@ Outputs in ``output_dir`` (default: ``runs/<task>/<method>_<protocol>/seed<seed>
 :mod:`temporal_torchrl.runs.directory`): ``episodes.csv`` (episode, env_steps, success, return =
 sum of sparse task rewards, mean_vlm_reward, stage), ``eval.csv`` (with ``eval.every``: one row
 per evaluation), ``summary.json`` (TTFS, TT50S, RAS, the last and best evaluation, throughput,
-the resolved config, the last training metrics), ``checkpoint.pt`` + ``replay/``
-(resume), ``metrics.jsonl`` (whatever ``logger.backend``: per-episode rows and, every
-``logger.log_every`` updates, SAC's and the heads' losses and the relabelled reward statistics;
-what reports read) and the same in ``logs/`` (CSV logger) or ``wandb/``.
+the resolved config, the last training metrics, the provenance), ``provenance.json`` (each
+start's commit and whether the tree was clean, library versions, CPU, torch threads),
+``checkpoint.pt`` + ``replay/`` (resume), ``metrics.jsonl`` (whatever ``logger.backend``:
+per-episode rows and, every ``logger.log_every`` updates, SAC's and the heads' losses and the
+relabelled reward statistics; what reports read) and the same in ``logs/`` (CSV logger) or
+``wandb/``.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from temporal_torchrl.runs import (
     run_directory,
     sweep_job_config,
 )
+from temporal_torchrl.runs.provenance import current_provenance
 from temporal_torchrl.runs.sweep_job import run_sweep_job
 from temporal_torchrl.training import (
     EpisodeAssembler,
@@ -172,6 +175,7 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
         print(f"{run_dir.path}: already complete ({start.checkpoint.episode} episodes)")
         return start.summary
     cfg, training = start.cfg, build(start, run_dir)
+    run_dir.record_start(current_provenance(training.state.progress.episode))  # commit, versions
     buffer, trainer, relay, logger = (training.buffer, training.trainer, training.relay,
                                       training.logger)
     state, progress = training.state, training.state.progress
@@ -277,7 +281,7 @@ def _train(cfg: DictConfig, run_dir: RunDirectory, given_keys: Collection[str] |
         cfg, progress, encoder=cfg.encoder.name if training.encoder is not None else None,
         steps_per_second=(progress.env_steps - start_steps) / (time.perf_counter() - start_time),
         relay_steps=relay.total_steps, phase_seconds=clock.totals(),
-        evaluations=run_dir.evaluation_rows())
+        evaluations=run_dir.evaluation_rows(), provenance=run_dir.provenance())
     run_dir.write_summary(summary)
     log_metrics(logger, {f"summary/{key}": float(summary[key]) for key in ("ttfs", "tt50s")},
                 progress.env_steps)

@@ -23,6 +23,7 @@ def make_run(run: Path, finished: bool, evaluated: bool = False) -> None:
     (run / "config.json").write_text("{}")
     (run / "episodes.csv").write_text("episode\n1\n")
     (run / "metrics.jsonl").write_text("{}\n")
+    (run / "provenance.json").write_text('{"starts": []}')
     (run / "logs" / "seed0" / "scalars" / "loss.csv").write_text("1,2\n")
     if finished:
         (run / "summary.json").write_text("{}")
@@ -48,7 +49,7 @@ def test_collect_copies_finished_runs_raw_files_only(tmp_path):
     assert copied == [run]
     assert sorted(path.relative_to(run).as_posix() for path in run.rglob("*")) == [
         "config.json", "episodes.csv", "logs", "logs/seed0", "logs/seed0/scalars",
-        "logs/seed0/scalars/loss.csv", "metrics.jsonl", "summary.json"]
+        "logs/seed0/scalars/loss.csv", "metrics.jsonl", "provenance.json", "summary.json"]
     assert sorted(path.name for path in (tmp_path / "results").iterdir()) == ["window-close"]
 
     copied = collect_study(sweep, tmp_path / "evaluated", ["push/*/*"])

@@ -132,7 +132,8 @@ def test_a_sweep_job_resumes_restarts_or_leaves_alone_what_it_finds(tmp_path, ca
     ("sac_column", "sac", {"window-close": 200, "window-open": 200, "drawer-open": 300}),
     ("window_close_cpu_study", "sac,furl_rho1,none", {"window-close": 200}),
     ("table_5_12_cpu", "sac,furl_rho1,none",
-     {"window-close": 200, "window-open": 200, "drawer-open": 300})])
+     {"window-close": 200, "window-open": 200, "drawer-open": 300, "door-open": 400,
+      "button-press-topdown": 400, "push": 1000})])
 def test_budget_studies_run_each_task_to_its_ras_budget(study, presets, tasks):
     params = hydra_config(f"+study={study}").hydra.sweeper.params
     assert params["preset"] == presets and params["env.seed"] == "0,1,2,3"
@@ -150,7 +151,7 @@ def test_budget_studies_run_each_task_to_its_ras_budget(study, presets, tasks):
 
 
 @pytest.mark.parametrize("preset", ["sac", "furl_rho1", "none"])
-@pytest.mark.parametrize("task", ["window-open", "drawer-open"])
+@pytest.mark.parametrize("task", ["window-open", "drawer-open", "door-open"])
 def test_table_5_12_cpu_runs_window_close_studys_configs_on_its_tasks(preset, task):
     # Its window-open and drawer-open cells were launched as window_close_cpu_study with
     # env.task overridden: the same configs, so the same run directories.

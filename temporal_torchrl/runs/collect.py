@@ -1,6 +1,7 @@
 """A study's raw files, copied out of its sweep so that they can be committed.
 
-A finished run's raw files are what the reports read: its config, summary, episode rows, periodic
+A finished run's raw files are what the reports read: its config, summary, provenance, episode
+rows, periodic
 evaluations (``eval.csv``, where the run evaluated) and logged metrics (``metrics.jsonl`` and the
 CSV logger's ``logs/``). Its checkpoints and replay episodes (megabytes a run, needed only to
 resume it or to plot its reward curves) stay in the sweep. Hydra's ``multirun.yaml`` is not copied:
@@ -22,11 +23,13 @@ from temporal_torchrl.runs.layout import (
     EVALUATION_FILE,
     LOGS_DIR,
     METRICS_FILE,
+    PROVENANCE_FILE,
     SUMMARY_FILE,
 )
 
 #: What a committed run holds: files, then folders.
-RAW_FILES = (CONFIG_FILE, SUMMARY_FILE, EPISODES_FILE, EVALUATION_FILE, METRICS_FILE)
+RAW_FILES = (CONFIG_FILE, SUMMARY_FILE, EPISODES_FILE, EVALUATION_FILE, METRICS_FILE,
+             PROVENANCE_FILE)
 RAW_FOLDERS = (LOGS_DIR,)
 
 

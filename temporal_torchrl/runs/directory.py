@@ -14,6 +14,7 @@ Layout::
     <run>/checkpoint.previous.pt    the one before, kept until the new one is complete
     <run>/checkpoint.pt.unreadable  a latest checkpoint a resume could not read, kept aside
     <run>/summary.json              TTFS, TT50S, RAS, throughput (when the run has ended)
+    <run>/provenance.json           each start's commit, library versions, CPU and torch threads
     <run>/run.lock, run.lock.json   the writer's lock and who holds it (host, pid, since)
     <run>/logs/, wandb/             the files of the TorchRL logger ``logger.backend`` names
 
@@ -82,6 +83,7 @@ from temporal_torchrl.runs.layout import (
     LOCK_FILES,
     METRICS_FILE,
     POSITIVES_DIR,
+    PROVENANCE_FILE,
     REPLAY_DIR,
     SUMMARY_FILE,
 )
@@ -209,6 +211,10 @@ class RunDirectory:
         summary = self.summary()
         if summary is not None and summary.get("episodes", 0) > checkpoint.episode:
             (self.path / SUMMARY_FILE).unlink()
+        starts = self.provenance()
+        if any(start["episode"] > checkpoint.episode for start in starts):
+            self._write_provenance([start for start in starts
+                                    if start["episode"] <= checkpoint.episode])
         return checkpoint
 
     def load_checkpoint(self) -> Checkpoint:
@@ -273,6 +279,19 @@ class RunDirectory:
     def truncate_positives(self, episodes: int) -> None:
         """Drop the positives saved after the checkpoint's ``episodes`` (they are re-run)."""
         self.positives.truncate(episodes + 1)
+
+    def record_start(self, entry: Mapping[str, Any]) -> None:
+        """Add one start's provenance entry (:func:`~temporal_torchrl.runs.provenance.
+        current_provenance`) to ``provenance.json``."""
+        self._write_provenance([*self.provenance(), dict(entry)])
+
+    def provenance(self) -> list[dict[str, Any]]:
+        """Each start's provenance entry, oldest first; empty for runs from before the file."""
+        path = self.path / PROVENANCE_FILE
+        return json.loads(path.read_text())["starts"] if path.exists() else []
+
+    def _write_provenance(self, starts: list[dict[str, Any]]) -> None:
+        write_json(self.path / PROVENANCE_FILE, {"starts": starts})
 
     def write_summary(self, summary: dict[str, Any]) -> None:
         write_json(self.path / SUMMARY_FILE, summary)

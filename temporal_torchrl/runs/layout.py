@@ -13,6 +13,8 @@ EPISODES_FILE = "episodes.csv"
 #: Evaluations of the deterministic policy (``eval.every``).
 EVALUATION_FILE = "eval.csv"
 SUMMARY_FILE = "summary.json"
+#: Where each start of the run ran (:mod:`~temporal_torchrl.runs.provenance`).
+PROVENANCE_FILE = "provenance.json"
 CHECKPOINT = "checkpoint.pt"
 #: The checkpoint before the latest, kept until the new one is complete on disk.
 PREVIOUS_CHECKPOINT = "checkpoint.previous.pt"
