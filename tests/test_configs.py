@@ -75,6 +75,52 @@ def test_hydra_refuses_a_wrong_type_naming_the_key(config_name, override, messag
     assert message in error_chain(error.value)
 
 
+PLUS_APPLIES = "'+' adds keys only under reward.options and encoder.options"
+
+
+@pytest.mark.parametrize(("override", "key", "suggestion"), [
+    ("+train.epsiodes=3", "train.epsiodes", "Did you mean train.episodes?"),
+    ("+sac.foo=1", "sac.foo", None),
+    ("+env.camra=x", "env.camra", "Did you mean env.camera?"),
+    ("+eval.seed=3", "eval.seed", None),
+    ("+encoder.dims=8", "encoder.dims", None),
+    ("+reward.lambda=2", "reward.lambda", "Did you mean reward.lambda_?"),
+    ("+replay_buffer.capacty=9", "replay_buffer.capacty", "Did you mean replay_buffer.capacity?"),
+    ("+compile.enable=true", "compile.enable", "Did you mean compile.enabled?"),
+    ("+logger.projekt=x", "logger.projekt", "Did you mean logger.project?"),
+    ("+seed=1", "seed", None),
+])
+def test_a_key_nothing_reads_is_refused_naming_it(override, key, suggestion):
+    cfg = composed("config", override)  # Hydra adds it: '+' is how its message says to
+    with pytest.raises(ValueError) as error:
+        validate_recipe_config(cfg)
+    message = str(error.value)
+    assert message.startswith(f"config key {key!r} is not declared ")
+    assert PLUS_APPLIES in message
+    assert (suggestion in message) if suggestion else "Did you mean" not in message
+
+
+def test_the_reward_quality_recipe_refuses_a_key_nothing_reads():
+    cfg = composed("evaluate_rewards", "+dataset.expert_episode=3")
+    with pytest.raises(ValueError, match=r"config key 'dataset\.expert_episode' is not declared in "
+                                         r"section 'dataset' \(DatasetConfig\).*Did you mean "
+                                         r"dataset\.expert_episodes\?"):
+        validate_reward_quality_config(cfg)
+
+
+def test_open_groups_and_hydras_keys_are_not_refused():
+    cfg = validate_recipe_config(composed("config", "encoder.name=state", "+encoder.options.dim=8"))
+    assert cfg.encoder.options.dim == 8
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        with_hydra = compose("config", return_hydra_config=True)
+    validate_recipe_config(with_hydra)
+
+
+@pytest.mark.parametrize("study", sorted(path.stem for path in (RECIPES / "study").glob("*.yaml")))
+def test_every_study_file_declares_only_keys_the_recipe_reads(study):
+    validate_recipe_config(composed("config", f"+study={study}", "env.task=drawer-open"))
+
+
 @pytest.mark.parametrize(("override", "message"), [
     ("train.episodes=0", "config train.episodes=0 is invalid: expected an integer >= 1. Fix it on "
      "the command line, e.g. train.episodes=<value>."),
@@ -111,8 +157,8 @@ def test_a_config_built_in_code_is_typed_by_the_schema():
     with pytest.raises(ValueError, match=r"config reward\.rho is invalid: Value 'abc' of type "
                                          r"'str' could not be converted to Float"):
         validate_recipe_config(OmegaConf.create({"reward": {"rho": "abc"}}))
-    with pytest.raises(ValueError, match=r"config train\.epsiodes is invalid: Key 'epsiodes' not "
-                                         r"in 'TrainConfig'"):
+    with pytest.raises(ValueError, match=r"config key 'train\.epsiodes' is not declared in "
+                                         r"section 'train' \(TrainConfig\)"):
         validate_recipe_config(OmegaConf.create({"train": {"epsiodes": 5}}))
     cfg = validate_recipe_config(OmegaConf.create({"train": {"utd_ratio": "0.5"}}))
     assert cfg.train.utd_ratio == 0.5 and cfg.env.task == "drawer-open"  # the rest: defaults

@@ -402,6 +402,16 @@ def test_resume_validates_the_config_it_runs(tmp_path):
     with pytest.raises(ValueError, match=r"reward\.rho=-1\.0"):
         sac_temporal.train(config(tmp_path, "resume=true"))
 
+    saved["reward"]["rho"] = 1.0
+    saved["train"]["epsiodes"] = 3  # a key this version does not read (an old or edited file)
+    saved_config.write_text(json.dumps(saved))
+    with pytest.raises(ValueError) as error:
+        sac_temporal.train(config(tmp_path, "resume=true"))
+    message = str(error.value)
+    assert message.startswith("config key 'train.epsiodes' is not declared in section 'train'")
+    assert f"The run's saved {saved_config}" in message
+    assert "remove the key from that file to resume it with this version" in message
+
 
 def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
     """Resuming with more episodes grows a whole-run buffer; with a fixed capacity the ring

@@ -12,6 +12,7 @@ the key itself); a resumed config or one built in code gets its types here.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import importlib
 import importlib.util
 import re
@@ -46,6 +47,48 @@ def _invalid(key: str, value: Any, expected: str) -> ValueError:
 
 
 # --------------------------------------------------------------------------- both recipes
+#: The groups open by design: the chosen reward's or encoder's options, which the registries
+#: check against what that reward or encoder declares (``+reward.options.<key>``).
+OPEN_GROUPS = ("reward.options", "encoder.options")
+#: Top-level keys a schema does not declare and nothing here reads: Hydra's own settings.
+_HYDRA_KEYS = ("hydra",)
+
+
+def check_declared_keys(cfg: Mapping[str, Any], schema: type, source: str | None = None,
+                        prefix: str = "") -> None:
+    """Refuse a key ``schema`` does not declare (nothing would read it), outside
+    :data:`OPEN_GROUPS` and Hydra's ``hydra.*``: a ``ValueError`` naming the key and its section,
+    the nearest declared key when one is close, and where ``+`` applies. ``source``: where the
+    config came from, when not the composed command line, preset, protocol and study (a resumed
+    run's saved file)."""
+    declared = {spec.name: spec for spec in dataclasses.fields(schema)}
+    hints = typing.get_type_hints(schema)
+    for key in cfg:
+        full_key = prefix + str(key)
+        if not prefix and key in _HYDRA_KEYS or full_key in OPEN_GROUPS:
+            continue
+        if key not in declared:
+            raise _undeclared(full_key, schema, list(declared), source)
+        value, annotation = cfg[key] if isinstance(cfg, Mapping) else None, hints[key]
+        if dataclasses.is_dataclass(annotation) and isinstance(value, Mapping):
+            check_declared_keys(value, annotation, source, f"{full_key}.")
+
+
+def _undeclared(full_key: str, schema: type, declared: list[str],
+                source: str | None) -> ValueError:
+    section, _, name = full_key.rpartition(".")
+    where = f"in section {section!r} ({schema.__name__})" if section else \
+        f"at the top level ({schema.__name__})"
+    close = difflib.get_close_matches(name, declared, n=1, cutoff=0.6)
+    suggestion = f" Did you mean {'.'.join(filter(None, (section, close[0])))}?" if close else ""
+    found = f" {source} holds it." if source else ""
+    return ValueError(
+        f"config key {full_key!r} is not declared {where}, so nothing would read it.{found}"
+        f"{suggestion} Set a declared key without '+' (declared here: {', '.join(declared)}); "
+        f"'+' adds keys only under {' and '.join(OPEN_GROUPS)}, whose keys the chosen reward "
+        f"or encoder declares. The schema: {schema.__module__}.")
+
+
 def typed(cfg: DictConfig, schema: type) -> DictConfig:
     """``cfg`` as ``schema`` types it (a copy). Hydra typed a config it composed already; a
     resumed config (its saved ``config.json`` over the current one) or one built in code gets
@@ -207,13 +250,16 @@ def _check_baseline(task: str, baseline: str) -> None:
 
 
 # --------------------------------------------------------------------------- the training recipe
-def validate_recipe_config(cfg: DictConfig) -> DictConfig:
+def validate_recipe_config(cfg: DictConfig, source: str | None = None) -> DictConfig:
     """``recipes/sac_temporal.py``'s config, typed by
     :class:`~temporal_torchrl.configs.recipe.RecipeConfig` and checked; a ``ValueError`` naming
     the key on a bad value.
 
-    Imports ``reward.modules`` first, so the rewards they register are known.
+    Imports ``reward.modules`` first, so the rewards they register are known. ``source``: where
+    the config came from, named by the error on a key the schema does not declare
+    (:func:`check_declared_keys`).
     """
+    check_declared_keys(cfg, RecipeConfig, source)
     cfg = typed(cfg, RecipeConfig)
     check_constraints(cfg, RecipeConfig)
     import_reward_modules(cfg.reward.modules)  # they may register the reward names checked below
@@ -271,6 +317,7 @@ def validate_reward_quality_config(cfg: DictConfig) -> DictConfig:
 
     Imports ``reward.modules`` first, so the rewards they register are known.
     """
+    check_declared_keys(cfg, RewardQualityConfig)
     cfg = typed(cfg, RewardQualityConfig)
     check_constraints(cfg, RewardQualityConfig)
     import_reward_modules(cfg.reward.modules)

@@ -18,7 +18,13 @@ from tensordict import TensorDictBase
 
 from temporal_torchrl.configs.rules import validate_recipe_config
 from temporal_torchrl.data import EpisodeReplayBuffer
-from temporal_torchrl.runs import Checkpoint, RunDirectory, check_no_conflict, resumed_config
+from temporal_torchrl.runs import (
+    CONFIG_FILE,
+    Checkpoint,
+    RunDirectory,
+    check_no_conflict,
+    resumed_config,
+)
 from temporal_torchrl.training.state import (
     TrainingProgress,
     TrainingState,
@@ -85,7 +91,11 @@ def start_run(run: RunDirectory, cfg: DictConfig,
     run.check(resume=cfg.resume, overwrite=cfg.overwrite)
     if not cfg.resume:
         return RunStart(run, cfg, None)
-    cfg = validate_recipe_config(resumed_config(cfg, run.path, given_keys))
+    saved = run.path / CONFIG_FILE  # the one source of a key the validated cfg did not have
+    cfg = validate_recipe_config(resumed_config(cfg, run.path, given_keys), source=(
+        f"The run's saved {saved} (written by a version that read the key, or edited): remove "
+        "the key from that file to resume it with this version, or resume it with the commit "
+        "its provenance.json names."))
     checkpoint = run.resume_state()
     summary = run.summary()
     complete = checkpoint.episode >= cfg.train.episodes and summary
