@@ -31,6 +31,9 @@ and writes into ``--out``:
   table, ours beside the thesis in every cell, "not run" where we did not, the averages over the
   tasks run and each compared with the thesis (:mod:`temporal_torchrl.reports.thesis_table`);
   ``report.md`` leads with it;
+- ``primary_claim.md``/``.csv`` with ``--primary X Y`` (and ``--secondary``): a registered
+  plan's test of X against Y over the tasks (:mod:`temporal_torchrl.reports.primary_claim`),
+  on the ``--planned-seeds`` only;
 - ``runs.csv``: every run with its episodes and metrics (or why it has none yet);
 - ``success_curves.png``: running-average success (window 150) per task and configuration;
 - ``evaluation.md``/``.csv`` and ``evaluation_curves.png``, only when some runs evaluated their
@@ -80,6 +83,12 @@ from temporal_torchrl.reports.plots import (
     plot_reward_curves,
     plot_success_curves,
 )
+from temporal_torchrl.reports.primary_claim import (
+    PRIMARY_CLAIM_COLUMNS,
+    build_primary_claim,
+    primary_claim_markdown,
+    primary_claim_rows,
+)
 from temporal_torchrl.reports.tables import (
     CSV_COLUMNS,
     RELIABLE_COLUMNS,
@@ -120,9 +129,9 @@ HOW_TO_READ = """\
 - The thesis's values are LIV's (4 seeds); runs with another encoder are compared with them
   all the same, and the Note column says so. A difference from the thesis comes with its 95%
   interval, the thesis's mean counted as 4 seeds with a spread like ours where it prints no
-  std, and a reading: *agrees* (the interval includes 0; its half-width says how precisely),
-  *not resolved* (it excludes 0, the interval over every cell compared does not) or *does not
-  agree* (both exclude 0).
+  std, and a reading: *below* or *above* (the interval over every cell compared excludes 0),
+  *equivalent within ±10* (RAS only: the 90% interval lies inside ±10 points, a margin fixed
+  before the runs) or *not resolved* (neither; an interval that includes 0 is not agreement).
 - *Over tasks and seeds (rliable)*: each configuration's runs on all its tasks, scored in
   [0, 1] (higher is better): RAS / 100; for TTFS and TT50S, 1 − TTFS / 1000, with a run that
   has not reached the success (within 1,000 episodes, or censored before) scored 0, a lower
@@ -156,6 +165,18 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         metavar=("X", "Y"),
                         help="also give P(X > Y) for these two configurations, by their labels "
                              "as printed (repeatable)")
+    parser.add_argument("--primary", nargs=2, action="append", default=[],
+                        metavar=("X", "Y"),
+                        help="a primary hypothesis of a registered plan, X against Y over the "
+                             "tasks (repeatable; Holm's correction over them): "
+                             "primary_claim.md")
+    parser.add_argument("--secondary", nargs=2, action="append", default=[],
+                        metavar=("X", "Y"),
+                        help="a secondary hypothesis, tested alike outside Holm's family")
+    parser.add_argument("--planned-seeds", type=int, nargs="+", default=[0, 1, 2, 3],
+                        metavar="SEED",
+                        help="the seeds the plan fixed (default 0 1 2 3); runs of other seeds "
+                             "were added after looking and enter no primary or secondary test")
     parser.add_argument("--thesis-table", default=None, metavar="NUMBER",
                         help="lay the runs out as this thesis table (e.g. 5.12), ours beside "
                              "the thesis, and lead the report with it")
@@ -209,9 +230,19 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"--baseline {args.baseline!r}: no configuration has that label; "
                          f"the configurations are: {'; '.join(map(repr, labels))}.")
     baseline = args.baseline or DEFAULT_BASELINE
-    for label in {label for pair in args.compare for label in pair} - set(labels):
-        raise SystemExit(f"--compare {label!r}: no configuration has that label; the "
-                         f"configurations are: {'; '.join(map(repr, labels))}.")
+    for option, pairs in (("--compare", args.compare), ("--primary", args.primary),
+                          ("--secondary", args.secondary)):
+        for label in {label for pair in pairs for label in pair} - set(labels):
+            raise SystemExit(f"{option} {label!r}: no configuration has that label; the "
+                             f"configurations are: {'; '.join(map(repr, labels))}.")
+    claim = None
+    if args.primary or args.secondary:
+        try:
+            claim = build_primary_claim(groups, [tuple(pair) for pair in args.primary],
+                                        [tuple(pair) for pair in args.secondary],
+                                        args.planned_seeds)
+        except ValueError as error:
+            raise SystemExit(f"--primary/--secondary: {error}") from None
     page = None
     if args.thesis_table is not None:
         try:
@@ -237,6 +268,10 @@ def main(argv: list[str] | None = None) -> None:
         markdown = write_table(args.out, name, thesis_table_markdown(page),
                                thesis_table_rows(page), THESIS_TABLE_COLUMNS)
         sections.insert(4, markdown)  # the report leads with it, before how to read it
+    if claim is not None:
+        sections.insert(5 if page is not None else 4, write_table(
+            args.out, "primary_claim", primary_claim_markdown(claim), primary_claim_rows(claim),
+            PRIMARY_CLAIM_COLUMNS))
 
     tables = {}
     for metric in METRICS:

@@ -28,7 +28,7 @@ from temporal_torchrl.reports import (
     reward_curves,
     run_value,
 )
-from temporal_torchrl.reports.aggregate import CENSORED, INCOMPLETE
+from temporal_torchrl.reports.aggregate import CENSORED, INCOMPLETE, TimeToEvent
 from temporal_torchrl.reports.groups import distinguishing_keys
 from temporal_torchrl.reports.logs import csv_scalars
 from temporal_torchrl.reports.reliable import (
@@ -122,28 +122,35 @@ def test_ttfs_censored_below_the_horizon_and_capped_at_it(tmp_path):
     assert run_value(few_run, "ttfs").value == 1
     assert run_value(few_run, "tt50s").status == CENSORED
     table = build_table(group_runs(find_runs([tmp_path])), "ttfs")
-    # The censored run counts 1,000 (values 1, 1000, 1000); the median is the censored run's
-    # own value, somewhere in (120, 1000]: undetermined.
-    assert markdown_row(table_markdown(table), "drawer-open")[1] == \
-        "**667 ± 577** (n=3; 1 censored > 120 ep, counted 1000; median undetermined)"
+    # Kaplan-Meier by hand: one event at 1 among 3 runs at risk (S = 2/3), then only censored
+    # runs (at 120 and at the horizon): the share still waiting never falls to one half. A cell
+    # with a censored run has no mean: no stand-in is averaged.
+    [cell] = table.cells.values()
+    assert (cell.mean, cell.std) == (None, None)
+    assert (cell.time_to_event.median, cell.time_to_event.reached,
+            cell.time_to_event.runs) == (None, 1, 3)
+    assert markdown_row(table_markdown(table), "drawer-open")[1] == (
+        "median not reached (1 of 3 reached), Kaplan-Meier; 1 censored > 120 ep; no mean")
 
 
-def test_median_beside_a_censored_mean_when_determined(tmp_path):
-    # TT50S of four 200-episode runs: 120, 150, 180 and one censored > 200. Counted at 1,000
-    # the mean is (120 + 150 + 180 + 1000) / 4; the median is 165 whatever the censored run's
-    # value in (200, 1000], since it lies above the other three.
+def test_kaplan_meier_median_of_a_censored_cell(tmp_path):
+    # TT50S of four 200-episode runs: 120, 150, 180 and one censored > 200. By hand: at 120,
+    # 4 at risk, S = 3/4; at 150, 3 at risk, S = 3/4 * 2/3 = 1/2: the median is 150, the
+    # first time S is at most one half. With 180 as well S = 1/4; the censored run never
+    # changes it. No mean, since the censored run's time is unknown.
     for seed, first in enumerate((70, 100, 130)):
         make_run(tmp_path, f"s{seed}", [False] * first + [True] * (200 - first), *FURL,
                  f"env.seed={seed}")
     make_run(tmp_path, "s3", [True] * 40 + [False] * 160, *FURL, "env.seed=3")
     [group] = group_runs(find_runs([tmp_path]))
-    cell = build_table([group], "tt50s").cells["drawer-open", group.label]
+    table = build_table([group], "tt50s")
+    cell = table.cells["drawer-open", group.label]
     assert [value.value for value in cell.runs[:3]] == [120, 150, 180]
-    assert cell.mean == pytest.approx((120 + 150 + 180 + 1000) / 4)
-    assert cell.std == pytest.approx(np.std([120, 150, 180, 1000], ddof=1))
-    assert (cell.median, cell.median_censored) == (165.0, False)
-    assert "1 censored > 200 ep, counted 1000; median 165" in table_markdown(
-        build_table([group], "tt50s"))
+    assert cell.mean is None and cell.time_to_event == TimeToEvent(150.0, 3, 4)
+    assert "median 150 (3 of 4 reached), Kaplan-Meier; 1 censored > 200 ep; no mean" in \
+        table_markdown(table)
+    assert (rows_by(table, "drawer-open")[group.label]["median"],
+            rows_by(table, "drawer-open")[group.label]["reached"]) == ("150", "3")
 
 
 def test_runs_differing_in_rho_are_never_merged(tmp_path):
@@ -266,7 +273,7 @@ def test_published_value_matched_and_difference(tmp_path):
                        * math.sqrt(3 / 4))
     low, high = scipy_stats.ttest_ind(ours, stand_in, equal_var=False).confidence_interval()
     assert ("| FuRL ρ=0.05 [metaworld_small] | drawer-open | 73.3 ± 37.7 (n=2) | 41.7 | "
-            f"+31.6 [{low:+.1f}, {high:+.1f}]: agrees (±{(high - low) / 2:.1f}) "
+            f"+31.6 [{low:+.1f}, {high:+.1f}]: not resolved "
             "| 5.4, 5.5, 5.6 | encoder metaworld_small (thesis: liv) |") in markdown
     assert "with a spread like ours where the thesis prints no std" in markdown
     # stage 1 with D3 matches Table 5.2, whose baseline the thesis does not state
@@ -579,10 +586,11 @@ def test_report_cli_end_to_end(tmp_path, real_run):
     with (out / "runs.csv").open() as file:
         assert len(list(csv.DictReader(file))) == 5
     ttfs = (out / "ttfs.md").read_text()
-    # SAC's one run is censored at 300 episodes, FuRL's seed 2 at 40: both count 1,000
+    # SAC's one run is censored at 300 episodes, FuRL's seed 2 at 40. FuRL by hand: seed 2
+    # leaves the runs at risk at 40, so at 151 two are at risk and S = 1/2: the median is 151.
     assert markdown_row(ttfs, "drawer-open")[1:] == [
-        "1000 (n=1; 1 censored > 300 ep, counted 1000; median undetermined)",
-        "**437 ± 487** (n=3; 1 censored > 40 ep, counted 1000; median undetermined)"]
+        "median not reached (0 of 1 reached), Kaplan-Meier; 1 censored > 300 ep; no mean",
+        "median 151 (2 of 3 reached), Kaplan-Meier; 1 censored > 40 ep; no mean"]
     report = (out / "report.md").read_text()
     assert "![running-average success](success_curves.png)" in report
     assert "(reward_curves.png)" in report

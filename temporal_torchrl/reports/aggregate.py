@@ -5,16 +5,17 @@ Each run gives a metric only when it has it (:func:`run_value`):
 - RAS (in %, as the thesis's tables) once the run has reached its task's budget e; before that
   the run is *incomplete* and shows its episode count. Tasks without a budget have no RAS.
 - TTFS / TT50S: the episode of the first / 50th success. A run that reached 1,000 episodes
-  (the thesis's horizon) without it scores 1,000, the thesis's convention; a shorter run without
-  it is *censored*: its value is only known to exceed its episode count, and it is shown so.
+  (the thesis's horizon) without it scores 1,000, the thesis's convention (the metric is capped
+  there); a shorter run without it is *censored*: its value is only known to exceed its episode
+  count, and it is shown so.
 
 A cell (one configuration on one task) holds the runs' values: the mean and the sample std
-(n - 1), as the thesis prints them. A censored run counts at the horizon (1,000 episodes), as the
-thesis's tables count a run that never succeeded: leaving it out would credit the configuration
-with its fastest runs only. Such a mean is an upper bound of the one the runs would give at
-1,000 episodes, so the cell says how many runs it counted so and gives the median beside it
-(where it does not depend on the censored runs' unknown values). Runs
-without a value (RAS incomplete or undefined) are listed with the cell, never averaged in. The
+(n - 1), as the thesis prints them. A TTFS or TT50S cell also carries its Kaplan-Meier estimate
+(:class:`TimeToEvent`): the median time, with the runs that reached the event, a censored run
+counted as what it is, a time known only to exceed its episodes. A cell with a censored run has
+no mean: any stand-in for the unknown time (the horizon, or the episodes run) would decide the
+mean, so such a cell gives the Kaplan-Meier median alone and enters no comparison or average.
+Runs without a value (RAS incomplete or undefined) are listed with the cell, never averaged in. The
 Average row is the mean of the task means, as in the thesis, given only when a configuration has
 complete cells on every task of the table. Interval estimates are
 :mod:`~temporal_torchrl.reports.reliable`'s (rliable), over tasks and seeds, and
@@ -27,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.protocol_metrics import (
@@ -42,7 +44,11 @@ from temporal_torchrl.reports.published import (
     PublishedResult,
     find_published,
 )
-from temporal_torchrl.reports.thesis_comparison import ThesisComparison, compare_with_thesis
+from temporal_torchrl.reports.thesis_comparison import (
+    EQUIVALENCE_MARGIN,
+    ThesisComparison,
+    compare_with_thesis,
+)
 from temporal_torchrl.runs.readers import Run
 
 #: A run has the metric.
@@ -57,16 +63,19 @@ UNDEFINED = "undefined"
 
 @dataclass(frozen=True)
 class Metric:
-    """One of the thesis's metrics: its key, title, direction and printed precision."""
+    """One of the thesis's metrics: its key, title, direction, printed precision and the margin
+    within which a cell counts as equivalent to the thesis's (None: never)."""
 
     name: str
     title: str
     higher_is_better: bool
     decimals: int
+    equivalence_margin: float | None = None
 
 
 METRICS = {
-    "ras": Metric("ras", "RAS (%)", higher_is_better=True, decimals=1),
+    "ras": Metric("ras", "RAS (%)", higher_is_better=True, decimals=1,
+                  equivalence_margin=EQUIVALENCE_MARGIN),
     "ttfs": Metric("ttfs", "TTFS (episodes)", higher_is_better=False, decimals=0),
     "tt50s": Metric("tt50s", "TT50S (episodes)", higher_is_better=False, decimals=0),
 }
@@ -115,34 +124,64 @@ def run_value(run: Run, metric: str, *, window: int = DEFAULT_WINDOW,
     if metric not in SUCCESS_COUNTS:
         raise ValueError(f"unknown metric {metric!r}; expected one of {', '.join(METRICS)}.")
     count = SUCCESS_COUNTS[metric]
-    reached = sum(run.successes[:horizon]) >= count
-    if not reached and run.episodes < horizon:
+    if not _reached(run, count, horizon) and run.episodes < horizon:
         return RunValue(run, None, CENSORED)
     return RunValue(run, float(time_to_successes(run.successes, count, horizon)), VALUE)
+
+
+@dataclass(frozen=True)
+class TimeToEvent:
+    """A cell's TTFS or TT50S by Kaplan-Meier (``scipy.stats.ecdf`` on ``CensoredData``): a run
+    that stopped without the event is censored at its episodes, one at the horizon at the
+    horizon.
+
+    Attributes:
+        median: the first time at which the estimated share of runs still waiting is at most
+            one half; None when it never falls that far (*not reached*).
+        reached: the runs that had the event.
+        runs: the runs estimated over.
+    """
+
+    median: float | None
+    reached: int
+    runs: int
+
+    @classmethod
+    def estimate(cls, observed: Sequence[float], censored: Sequence[float]) -> TimeToEvent:
+        if not observed:
+            return cls(None, 0, len(censored))
+        data = stats.CensoredData(uncensored=np.asarray(observed, dtype=float),
+                                  right=np.asarray(censored, dtype=float))
+        survival = stats.ecdf(data).sf
+        below_half = survival.quantiles[survival.probabilities <= 0.5]
+        median = float(below_half[0]) if below_half.size else None
+        return cls(median, len(observed), len(observed) + len(censored))
+
+    def describe(self, decimals: int = 0) -> str:
+        """``median 145 (3 of 4 reached)`` or ``median not reached (1 of 4 reached)``."""
+        median = "not reached" if self.median is None else f"{self.median:.{decimals}f}"
+        return f"median {median} ({self.reached} of {self.runs} reached)"
 
 
 @dataclass(frozen=True)
 class Cell:
     """One configuration on one task: its runs' values and their statistics.
 
-    ``mean``, ``std`` (sample, n - 1) and ``median`` are over the runs with a value and the
-    censored runs counted at the horizon (``std`` None below 2 of them, all None without any);
-    ``median_censored``: the median depends on a censored run's unknown value.
-    ``pending`` lists the runs without a value (RAS incomplete or undefined).
+    ``mean`` and ``std`` (sample, n - 1) are over the runs' values, None when a run has none
+    (RAS incomplete or undefined, or a censored TTFS / TT50S: no stand-in is averaged), ``std``
+    None below 2 values; ``time_to_event``: TTFS and TT50S's Kaplan-Meier estimate (None for
+    RAS). ``pending`` lists the runs without a value (RAS incomplete or undefined).
     """
 
     runs: tuple[RunValue, ...]
     mean: float | None
     std: float | None
-    median: float | None = None
-    median_censored: bool = False
-    horizon: int = DEFAULT_HORIZON
+    time_to_event: TimeToEvent | None = None
 
     @property
     def values(self) -> list[float]:
-        """The values the statistics are over: censored runs count as the horizon."""
-        return [run.value if run.status == VALUE else float(self.horizon)
-                for run in self.runs if run.status in (VALUE, CENSORED)]
+        """The runs' values (censored and pending runs have none)."""
+        return [run.value for run in self.runs if run.status == VALUE]
 
     @property
     def censored(self) -> list[RunValue]:
@@ -155,7 +194,7 @@ class Cell:
     @property
     def complete(self) -> bool:
         """Every run has a value (the cell can be compared and averaged)."""
-        return bool(self.runs) and not self.pending
+        return bool(self.runs) and all(run.status == VALUE for run in self.runs)
 
     def comparable_with(self, published: PublishedCell) -> bool:
         """Whether the cell is compared with the thesis's ``published`` value
@@ -169,19 +208,25 @@ class Cell:
 def make_cell(runs: Sequence[Run], metric: str, *, horizon: int = DEFAULT_HORIZON) -> Cell:
     """The cell of ``runs`` (one configuration, one task) for ``metric``."""
     values = tuple(run_value(run, metric, horizon=horizon) for run in runs)
-    counted = [value.value if value.status == VALUE else float(horizon)
-               for value in values if value.status in (VALUE, CENSORED)]
-    if not counted:
-        return Cell(values, None, None, horizon=horizon)
-    # A censored run's value lies in (its episodes, horizon]: the median is determined when it
-    # is the same at both ends.
-    earliest = [value.value if value.status == VALUE else float(value.run.episodes + 1)
-                for value in values if value.status in (VALUE, CENSORED)]
-    median = float(np.median(counted))
+    time_to_event = None
+    if metric in SUCCESS_COUNTS:
+        timed = [value for value in values if value.status in (VALUE, CENSORED)]
+        reached = [value.status == VALUE and _reached(value.run, SUCCESS_COUNTS[metric], horizon)
+                   for value in timed]
+        time_to_event = TimeToEvent.estimate(
+            [value.value for value, event in zip(timed, reached, strict=True) if event],
+            [value.value if value.status == VALUE else float(value.run.episodes)
+             for value, event in zip(timed, reached, strict=True) if not event])
+    counted = [value.value for value in values if value.status == VALUE]
+    if not counted or any(value.status == CENSORED for value in values):
+        return Cell(values, None, None, time_to_event)
     return Cell(values, mean=float(np.mean(counted)),
                 std=float(np.std(counted, ddof=1)) if len(counted) > 1 else None,
-                median=median, median_censored=float(np.median(earliest)) != median,
-                horizon=horizon)
+                time_to_event=time_to_event)
+
+
+def _reached(run: Run, count: int, horizon: int) -> bool:
+    return sum(run.successes[:horizon]) >= count
 
 
 @dataclass(frozen=True)
@@ -232,7 +277,8 @@ class MetricTable:
                     continue
                 compared.append(((task, group.label), cell, result.cells[task]))
         return {key: compare_with_thesis(cell.values, published.mean, published.std,
-                                         cells=len(compared))
+                                         cells=len(compared),
+                                         margin=self.metric.equivalence_margin)
                 for key, cell, published in compared}
 
 

@@ -43,10 +43,10 @@ from temporal_torchrl.reports.reliable import (
     score_rule,
 )
 from temporal_torchrl.reports.task_comparison import TaskComparison
-from temporal_torchrl.reports.thesis_comparison import ThesisComparison
+from temporal_torchrl.reports.thesis_comparison import ThesisComparison, reading_legend
 from temporal_torchrl.rewards.config import has_vlm_reward
 
-CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "median", "censored",
+CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "median", "reached", "censored",
                "best", "status", "without_value", "published_tables", "published_mean",
                "published_std", "difference", "difference_ci95_low", "difference_ci95_high",
                "reading")
@@ -58,7 +58,10 @@ TASK_COMPARISON_COLUMNS = ("configuration", "baseline", "task", "n", "baseline_n
                            "difference_ci95_low", "difference_ci95_high", "p_value",
                            "comparisons", "difference_adjusted_low",
                            "difference_adjusted_high", "pairs_won", "pairs", "reading")
-RUN_COLUMNS = ("configuration", "task", "seed", "episodes", "finished", *METRICS, "path")
+RUN_COLUMNS = ("configuration", "task", "seed", "episodes", "finished", *METRICS, "commits",
+               "path")
+#: A run's commits when it recorded none (it ran before ``provenance.json``).
+NOT_RECORDED = "not recorded"
 EMPTY_CELL = "—"
 
 
@@ -79,29 +82,31 @@ def _pending_text(pending: Sequence[RunValue]) -> str:
     return "; ".join(parts)
 
 
-def _censored_text(cell: Cell, decimals: int) -> str:
-    """``1 censored > 200 ep, counted 1000; median 151``; ``median undetermined`` when it
-    depends on the censored runs' unknown values."""
+def _censored_text(cell: Cell) -> str:
+    """``1 censored > 200 ep``: the runs that stopped before the horizon without the event."""
     episodes = ", ".join(str(value.run.episodes) for value in cell.censored)
-    median = "undetermined" if cell.median_censored else _number(cell.median, decimals)
-    return (f"{len(cell.censored)} censored > {episodes} ep, counted {cell.horizon}; "
-            f"median {median}")
+    return f"{len(cell.censored)} censored > {episodes} ep"
 
 
 def cell_text(cell: Cell | None, decimals: int, *, bold: bool = False) -> str:
-    """A Markdown cell: ``**41.7 ± 3.2** (n=4)``, with its censored runs and the runs that have
-    no value after it."""
+    """A Markdown cell: ``**41.7 ± 3.2** (n=4)``; a TTFS or TT50S cell with its Kaplan-Meier
+    median and the runs that reached it, and its censored runs instead of a mean when it has
+    any; the runs that have no value after it."""
     if cell is None:
         return EMPTY_CELL
     parts = []
-    if cell.values:
+    if cell.mean is not None:
         value = _number(cell.mean, decimals)
         if cell.std is not None:
             value += f" ± {_number(cell.std, decimals)}"
         count = f"n={len(cell.values)}"
-        if cell.censored:
-            count += f"; {_censored_text(cell, decimals)}"
+        estimate = cell.time_to_event
+        if estimate is not None and estimate.reached < estimate.runs:  # some at the horizon
+            count += f"; {estimate.describe(decimals)}, Kaplan-Meier"
         parts.append(f"{f'**{value}**' if bold else value} ({count})")
+    elif cell.time_to_event is not None and cell.time_to_event.runs:
+        parts.append(f"{cell.time_to_event.describe(decimals)}, Kaplan-Meier; "
+                     f"{_censored_text(cell)}; no mean")
     if cell.pending:
         parts.append(_pending_text(cell.pending))
     return "; ".join(parts)
@@ -213,10 +218,7 @@ def published_markdown(table: MetricTable) -> str:
             "baseline, alpha and protocol. Δ only where every run of the cell has a value; its "
             "interval is Welch's, the thesis's mean counted as 4 seeds")
     text += (" with a spread like ours where the thesis prints no std" if assumed else "")
-    text += (f". *agrees*: the 95% interval includes 0 (± its half-width); *not resolved*: it "
-             f"excludes 0, but the interval over all {len(comparisons)} cells compared "
-             f"(Bonferroni, shown after it) includes 0; *does not agree*: that one excludes 0 "
-             f"too."
+    text += (f". {reading_legend(len(comparisons), table.metric.equivalence_margin)}"
              if comparisons else ".")
     return "\n".join([f"#### {table.metric.title}: compared with the thesis", "",
                       markdown_table(header, rows), "", text])
@@ -233,6 +235,15 @@ def _comparison_fields(comparison: ThesisComparison | None) -> dict[str, str]:
             "difference_ci95_high": _optional(comparison.high), "reading": comparison.verdict}
 
 
+def _time_to_event_fields(cell: Cell) -> dict[str, str]:
+    """``median`` (Kaplan-Meier; empty when not reached) and ``reached`` (runs with the event)
+    of a TTFS or TT50S cell; empty for RAS."""
+    estimate = cell.time_to_event
+    if estimate is None:
+        return {"median": "", "reached": ""}
+    return {"median": _optional(estimate.median), "reached": str(estimate.reached)}
+
+
 def table_rows(table: MetricTable) -> list[dict[str, str]]:
     """The CSV rows of ``table`` (:data:`CSV_COLUMNS`), cells then the Average rows."""
     rows, comparisons = [], table.thesis_comparisons()
@@ -247,7 +258,7 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
             rows.append({
                 "task": task, "configuration": group.label, "runs": str(len(cell.runs)),
                 "n": str(len(cell.values)), "mean": _optional(cell.mean),
-                "std": _optional(cell.std), "median": _optional(cell.median),
+                "std": _optional(cell.std), **_time_to_event_fields(cell),
                 "censored": str(len(cell.censored)),
                 "best": str(group.label in best).lower(), "status": cell_status(cell),
                 "without_value": "; ".join(f"seed {value.run.seed}: {value.describe()}"
@@ -267,7 +278,8 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
         comparable = result is not None and set(table.tasks) == set(result.cells)
         rows.append({
             "task": "Average", "configuration": group.label, "runs": str(len(group.runs)),
-            "n": "", "mean": _optional(average), "std": "", "median": "", "censored": "",
+            "n": "", "mean": _optional(average), "std": "", "median": "", "reached": "",
+            "censored": "",
             "best": str(group.label in best).lower(), "status": "complete", "without_value": "",
             "published_tables": " ".join(result.tables) if comparable else "",
             "published_mean": _optional(result.average if comparable else None),
@@ -304,6 +316,7 @@ def run_rows(groups: Sequence[RunGroup], roots: Sequence[Path]) -> list[dict[str
         for run in group.runs:
             row = {"configuration": group.label, "task": run.task, "seed": str(run.seed),
                    "episodes": str(run.episodes), "finished": str(run.finished).lower(),
+                   "commits": " ".join(run.commits) or NOT_RECORDED,
                    "path": relative_run_path(run.path, roots)}
             for metric in METRICS:
                 value = run_value(run, metric)

@@ -33,11 +33,17 @@ from temporal_torchrl.reports.published import (
     PublishedTable,
     published_tables,
 )
-from temporal_torchrl.reports.tables import cell_text, markdown_table, published_text
+from temporal_torchrl.reports.tables import (
+    NOT_RECORDED,
+    cell_text,
+    markdown_table,
+    published_text,
+)
 from temporal_torchrl.reports.thesis_comparison import (
     ThesisComparison,
     compare_averages,
     compare_with_thesis,
+    reading_legend,
 )
 from temporal_torchrl.rewards.config import has_vlm_reward
 
@@ -125,7 +131,8 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str) -> ThesisTablePa
     for task, key in compared:
         published = table.rows[task][by_key[key].index]
         comparisons[task, key] = compare_with_thesis(
-            cells[task, key].values, published.mean, published.std, cells=len(compared))
+            cells[task, key].values, published.mean, published.std, cells=len(compared),
+            margin=METRICS[table.metric].equivalence_margin)
     averaged = {}
     for column in columns:
         tasks = tuple(task for task in table.rows if comparable(task, column))
@@ -140,7 +147,8 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str) -> ThesisTablePa
         comparison = compare_averages(
             [(cell.values, each.mean, each.std)
              for cell, each in zip(ours, published, strict=True)],
-            comparisons=several) if len(tasks) > 1 else None
+            comparisons=several, margin=METRICS[table.metric].equivalence_margin
+        ) if len(tasks) > 1 else None
         averages[key] = Average(tasks, float(np.mean([cell.mean for cell in ours])),
                                 float(np.mean([cell.mean for cell in published])), comparison)
     return ThesisTablePage(table, METRICS[table.metric], tuple(columns), cells, comparisons,
@@ -209,13 +217,34 @@ def thesis_table_markdown(page: ThesisTablePage) -> str:
                                    "Δ (ours − thesis) [95% CI]: reading"], comparison_rows), "",
                   f"Δ from unrounded means; Welch's interval with the thesis's mean counted as 4 "
                   f"seeds{' with a spread like ours (the thesis prints no std)' if assumed else ''}"
-                  f". *agrees*: the 95% interval includes 0 (± its half-width: a wide interval "
-                  f"is consistent with the thesis, not a precise agreement); *not resolved*: it "
-                  f"excludes 0, but the interval over all {len(page.comparisons)} cells "
-                  f"compared (Bonferroni, shown after it) includes 0; *does not agree*: that "
-                  f"one excludes 0 too. An average over several tasks is compared likewise, "
-                  f"its table-wide interval over the averages compared."]
+                  f". {reading_legend(len(page.comparisons), page.metric.equivalence_margin)} "
+                  f"An average over several tasks is compared likewise, its table-wide "
+                  f"interval over the averages compared."]
+    parts += ["", f"### Table {page.table.number}: the commits each cell's runs ran on", "",
+              markdown_table(["Column", "Task", "Commits"], commit_rows(page)), "",
+              f"From each run's provenance.json (first 12 hex digits; +dirty: the tracked files "
+              f"differed). *{NOT_RECORDED}*: the runs predate the record. A cell naming two "
+              f"commits mixes them."]
     return "\n".join(parts) + "\n"
+
+
+def commit_rows(page: ThesisTablePage) -> list[list[str]]:
+    """Per column and task run, the commits of the cell's runs (each once, in run order)."""
+    rows = []
+    for column in page.columns:
+        for task in page.table.rows:
+            cell = page.cells.get((task, column.key))
+            if cell is None:
+                continue
+            commits = dict.fromkeys(commit for value in cell.runs
+                                    for commit in value.run.commits)
+            unrecorded = sum(not value.run.commits for value in cell.runs)
+            text = ", ".join(commits)
+            if unrecorded:
+                runs = f" ({unrecorded} run{'s' if unrecorded > 1 else ''})" if commits else ""
+                text += f"{'; ' if text else ''}{NOT_RECORDED}{runs}"
+            rows.append([column.key, task, text])
+    return rows
 
 
 THESIS_TABLE_COLUMNS = ("task", "column", "our_configuration", "n", "mean", "std", "thesis_mean",

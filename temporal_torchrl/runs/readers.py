@@ -27,6 +27,7 @@ from temporal_torchrl.runs.layout import (
     CONFIG_FILE,
     EPISODES_FILE,
     EVALUATION_FILE,
+    PROVENANCE_FILE,
     SUMMARY_FILE,
 )
 
@@ -73,6 +74,19 @@ class Run:
     def finished(self) -> bool:
         """Whether the run wrote its summary after its last episode (and is not running on)."""
         return self.summary is not None and self.summary.get("episodes") == self.episodes
+
+    @property
+    def commits(self) -> tuple[str, ...]:
+        """The commits its starts ran on (:mod:`~temporal_torchrl.runs.provenance`), first 12
+        hex digits each, ``+dirty`` where the tracked files differed from the commit, in order,
+        each once; empty for a run from before ``provenance.json`` or outside a git checkout."""
+        starts = (self.summary or {}).get("provenance")
+        if starts is None:
+            path = self.path / PROVENANCE_FILE
+            starts = json.loads(path.read_text())["starts"] if path.is_file() else []
+        commits = [start["commit"][:12] + ("" if start["clean"] else "+dirty")
+                   for start in starts if start.get("commit")]
+        return tuple(dict.fromkeys(commits))
 
     def setting(self, key: str) -> Any:
         """The config value at dotted ``key``; a clear error when the config lacks it."""
