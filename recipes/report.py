@@ -84,6 +84,7 @@ from temporal_torchrl.reports.plots import (
     plot_success_curves,
 )
 from temporal_torchrl.reports.primary_claim import (
+    PLANNED_SEEDS,
     PRIMARY_CLAIM_COLUMNS,
     build_primary_claim,
     primary_claim_markdown,
@@ -173,10 +174,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--secondary", nargs=2, action="append", default=[],
                         metavar=("X", "Y"),
                         help="a secondary hypothesis, tested alike outside Holm's family")
-    parser.add_argument("--planned-seeds", type=int, nargs="+", default=[0, 1, 2, 3],
-                        metavar="SEED",
-                        help="the seeds the plan fixed (default 0 1 2 3); runs of other seeds "
-                             "were added after looking and enter no primary or secondary test")
+    parser.add_argument("--planned-seeds", type=int, nargs="+", default=None, metavar="SEED",
+                        help="the seeds a plan fixed: runs of other seeds were added after "
+                             "looking, and the --thesis-table page and the primary claim leave "
+                             "them out, naming them (default: every seed; the claim: 0 1 2 3)")
     parser.add_argument("--thesis-table", default=None, metavar="NUMBER",
                         help="lay the runs out as this thesis table (e.g. 5.12), ours beside "
                              "the thesis, and lead the report with it")
@@ -240,13 +241,13 @@ def main(argv: list[str] | None = None) -> None:
         try:
             claim = build_primary_claim(groups, [tuple(pair) for pair in args.primary],
                                         [tuple(pair) for pair in args.secondary],
-                                        args.planned_seeds)
+                                        args.planned_seeds or PLANNED_SEEDS)
         except ValueError as error:
             raise SystemExit(f"--primary/--secondary: {error}") from None
     page = None
     if args.thesis_table is not None:
         try:
-            page = build_thesis_table(groups, args.thesis_table)
+            page = build_thesis_table(groups, args.thesis_table, args.planned_seeds)
         except ValueError as error:
             raise SystemExit(f"--thesis-table {args.thesis_table}: {error}") from None
     scalars = {run.path: logged_scalars(run.path) for group in groups for run in group.runs

@@ -94,7 +94,8 @@ def test_the_claim_is_tested_on_the_planned_seeds_with_holm_over_the_primary_pai
 
 def test_report_writes_the_claim_and_each_cells_commits(runs, tmp_path):
     out = tmp_path / "out"
-    ras_run(runs, "window-close", BEST, 2, 100)  # no provenance: ran before the record
+    unrecorded = runs / "window-close" / BEST[0] / "seed1" / "summary.json"
+    unrecorded.write_text(json.dumps({"episodes": 200}))  # ran before the provenance record
     report.main([str(runs), "--out", str(out), "--thesis-table", "5.12", "--bootstrap", "100",
                  "--primary", LABELS[BEST], LABELS[FURL], "--primary", LABELS[BEST], LABELS[SAC],
                  "--secondary", LABELS[FURL], LABELS[SAC], "--planned-seeds", "0", "1"])
@@ -105,9 +106,12 @@ def test_report_writes_the_claim_and_each_cells_commits(runs, tmp_path):
         assert [row["hypothesis"] for row in csv.DictReader(file)] == [
             "primary", "primary", "secondary"]
     page = (out / "table_5_12.md").read_text()
-    assert f"| SAC | drawer-open | {'ab' * 6}; not recorded (1 run) |" in page  # seed 4
-    assert (f"| FuRL + r_D3 ρ=1.0 (ours: FuRL ρ=1 + D3 λ=4 (b_g)) | drawer-open | {'ab' * 6} |"
-            in page)
+    # the page holds the planned seeds only: drawer-open's SAC on 2 seeds, seed 4 named apart
+    assert "| drawer-open | 50.0 ± 14.1 (n=2) · thesis 53.5 |" in page
+    assert "as seeds added after looking" in page and "SAC, drawer-open, seed 4" in page
+    assert f"| SAC | drawer-open | {'ab' * 6} |" in page
+    assert (f"| FuRL + r_D3 ρ=1.0 (ours: FuRL ρ=1 + D3 λ=4 (b_g)) | window-close | {'ab' * 6}; "
+            f"not recorded (1 run) |") in page
     with (out / "runs.csv").open() as file:
         commits = {(row["configuration"], row["task"], row["seed"]): row["commits"]
                    for row in csv.DictReader(file)}

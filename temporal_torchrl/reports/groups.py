@@ -124,6 +124,13 @@ class RunGroup:
     def runs_for(self, task: str) -> list[Run]:
         return [run for run in self.runs if run.task == task]
 
+    def with_seeds(self, seeds: Iterable[int]) -> RunGroup:
+        """The group with only the runs of ``seeds`` (a plan's seeds, without those added
+        after looking)."""
+        kept = set(seeds)
+        return RunGroup(self.label, self.settings,
+                        tuple(run for run in self.runs if run.seed in kept))
+
 
 def task_order(task: str) -> tuple[int, str]:
     """Sort key: the thesis's six tasks in its order, then any other task alphabetically."""

@@ -93,6 +93,8 @@ class ThesisTablePage:
     cells: dict[tuple[str, str], Cell]
     comparisons: dict[tuple[str, str], ThesisComparison]
     averages: dict[str, Average]
+    #: Runs left out as added after looking (seeds outside the plan's): "SAC, drawer-open, seed 4".
+    after_looking: tuple[str, ...] = ()
 
     def published(self, task: str, column: ThesisColumn) -> PublishedCell:
         return self.table.rows[task][column.index]
@@ -107,9 +109,18 @@ def find_table(number: str) -> PublishedTable:
     return tables[number]
 
 
-def build_thesis_table(groups: Sequence[RunGroup], number: str) -> ThesisTablePage:
-    """The page of the thesis's table ``number`` for ``groups`` (module doc)."""
+def build_thesis_table(groups: Sequence[RunGroup], number: str,
+                       planned_seeds: Sequence[int] | None = None) -> ThesisTablePage:
+    """The page of the thesis's table ``number`` for ``groups`` (module doc); with
+    ``planned_seeds``, on the runs of those seeds only, the others named as added after
+    looking."""
     table = find_table(number)
+    after_looking = ()
+    if planned_seeds is not None:
+        after_looking = tuple(f"{group.label}, {run.task}, seed {run.seed}" for group in groups
+                              for run in group.runs if run.seed not in planned_seeds)
+        groups = [group.with_seeds(planned_seeds) for group in groups]
+        groups = [group for group in groups if group.runs]
     columns = []
     for index, published in enumerate(table.columns):
         matching = [group for group in groups
@@ -152,7 +163,7 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str) -> ThesisTablePa
         averages[key] = Average(tasks, float(np.mean([cell.mean for cell in ours])),
                                 float(np.mean([cell.mean for cell in published])), comparison)
     return ThesisTablePage(table, METRICS[table.metric], tuple(columns), cells, comparisons,
-                           averages)
+                           averages, after_looking)
 
 
 def _ours_text(cell: Cell | None, decimals: int) -> str:
@@ -210,6 +221,10 @@ def thesis_table_markdown(page: ThesisTablePage) -> str:
              "complete runs on, beside the thesis's mean over the same tasks."]
     if notes:
         parts += ["", *notes]
+    if page.after_looking:
+        parts += ["", "Left out of this page, as seeds added after looking (outside the plan's "
+                  "seeds; the per-metric tables keep them): " + "; ".join(page.after_looking)
+                  + "."]
     if comparison_rows:
         assumed = any(each.std_assumed for each in page.comparisons.values())
         parts += ["", f"### Table {page.table.number}: compared with the thesis", "",
