@@ -309,3 +309,45 @@ def test_the_api_reference_lists_every_package():
                            .read_text(), flags=re.M))
     assert listed == packages, f"docs/conf.py PACKAGES: {sorted(packages ^ listed)}"
     assert packages <= index, f"docs/api/index.rst: {sorted(packages - index)}"
+
+
+def _default_words(cell: str) -> list[str]:
+    """The defaults a row of the recipe guide's table states, one per key: ``1e-4, 256``."""
+    return [word.strip().strip("`") for word in cell.split(", ")]
+
+
+def _as_written(value) -> str:
+    """A default as the guide writes it: ``null``, ``true``, ``1e-4``, ``1,000``."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.0e}".replace("e-0", "e-") if 0 < value < 1e-3 else str(value)
+    if isinstance(value, int):
+        return f"{value:,}"
+    return str(value)
+
+
+def test_the_recipe_guides_table_of_defaults_is_the_schemas():
+    """Every default the recipe guide's key table states is the composed default config's (the
+    schema's, and for preset and protocol config.yaml's defaults list)."""
+    page = (DOCS / "guides" / "recipe.md").read_text()
+    rows = [line.split(" | ") for line in page.splitlines()
+            if line.startswith("| `") and line.count(" | ") >= 3]
+    with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+        cfg = OmegaConf.to_container(compose("config", return_hydra_config=True), resolve=True)
+    choices = cfg["hydra"]["runtime"]["choices"]
+    checked = []
+    for row in rows:
+        keys = re.findall(r"`([\w.]+)`", row[0])
+        defaults = _default_words(row[1])
+        assert len(keys) == len(defaults), row
+        for key, written in zip(keys, defaults, strict=True):
+            if key in choices:
+                actual = choices[key]
+            else:
+                actual = OmegaConf.select(OmegaConf.create(cfg), key)
+            assert written == _as_written(actual), f"{key}: the guide says {written}"
+            checked.append(key)
+    assert len(checked) >= 30 and {"preset", "train.episodes", "sac.lr"} <= set(checked)
