@@ -121,6 +121,36 @@ def test_every_study_file_declares_only_keys_the_recipe_reads(study):
     validate_recipe_config(composed("config", f"+study={study}", "env.task=drawer-open"))
 
 
+SCALE_KEYS = ("encoder", "env", "compile", "episodes", "random_steps")
+
+
+PRESETS = sorted(path.stem for path in (RECIPES / "preset").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_a_preset_states_its_reward_and_leaves_the_scale_to_the_scale_group(preset):
+    written = OmegaConf.to_container(OmegaConf.load(RECIPES / "preset" / f"{preset}.yaml"))
+    stated = {f"{key}.{sub}" if isinstance(value, dict) else key: None
+              for key, value in written.items() if key != "defaults"
+              for sub in (value if isinstance(value, dict) else [None])}
+    assert not [key for key in stated if any(part in key.split(".") for part in SCALE_KEYS)]
+    thesis = composed("config", f"preset={preset}")
+    cpu = composed("config", f"preset={preset}", "scale=cpu", "env.task=door-open")
+    if preset != "none":  # the quick default: the schema's scale
+        assert (thesis.encoder.name, thesis.env.image_size, thesis.train.episodes,
+                thesis.train.random_steps) == ("liv", 256, 1000, 10_000)
+    assert (cpu.encoder.name, cpu.env.image_size, cpu.train.episodes, cpu.train.random_steps,
+            cpu.compile.enabled) == ("metaworld_small", 64, 400, 10_000, True)
+    assert cpu.reward == thesis.reward  # the scale changes no reward key
+
+
+@pytest.mark.parametrize("preset", ["sac", "furl_rho1", "none"])
+def test_the_cpu_study_is_preset_protocol_and_scale(preset):
+    overrides = (f"preset={preset}", "protocol=stage2", "env.task=push")
+    study = OmegaConf.to_container(composed("config", "+study=table_5_12_cpu", *overrides))
+    assert study == OmegaConf.to_container(composed("config", "scale=cpu", *overrides))
+
+
 @pytest.mark.parametrize(("override", "message"), [
     ("train.episodes=0", "config train.episodes=0 is invalid: expected an integer >= 1. Fix it on "
      "the command line, e.g. train.episodes=<value>."),
