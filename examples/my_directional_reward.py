@@ -1,20 +1,23 @@
-"""A directional reward with a hyperparameter of its own, finetuned by a loss of its own.
+"""A directional reward with a hyperparameter of its own, finetuned by a loss of its own; and
+D3 finetuned by the built-in directional loss plus one term.
 
-One file: the reward function, its loss and the registration that declares both and the
-reward's options. The recipe imports it (``reward.modules``) and sets the options from the
+One file: the reward functions, their losses and the registrations that declare them and the
+rewards' options. The recipe imports it (``reward.modules``) and sets the options from the
 command line:
 
     python recipes/sac_temporal.py reward.modules=[examples/my_directional_reward.py] \\
         reward.directional=d_sharp +reward.options.sharpness=4 +reward.options.margin=0.2
     python recipes/evaluate_rewards.py reward.modules=[examples/my_directional_reward.py] \\
         reward.positional=none reward.directional=[d3,d_sharp] +reward.options.sharpness=4
+    python recipes/sac_temporal.py reward.modules=[examples/my_directional_reward.py] \\
+        reward.directional=d3_decay +reward.options.decay=0.001
 """
 
 from __future__ import annotations
 
 import torch
 
-from temporal_torchrl.objectives import FinetuningLoss
+from temporal_torchrl.objectives import DirectionalLoss, FinetuningLoss
 from temporal_torchrl.rewards import register_reward
 from temporal_torchrl.rewards.directional import d3
 
@@ -40,7 +43,8 @@ class MarginDirectionalLoss(FinetuningLoss):
     def __init__(self, reward, goal_image_embedding, *, stage):
         super().__init__(reward, reward.directional_heads, goal_image_embedding, stage=stage)
 
-    def forward(self, tensordict):
+    def terms(self, tensordict):
+        """The named terms; ``forward`` sums them into ``loss_directional``."""
         groups, margin = self.groups(tensordict), self.reward.options["margin"]
         # r_D of the direction embedding - previous_embedding, scored at `position`.
         score = self.reward.directional_reward
@@ -53,7 +57,7 @@ class MarginDirectionalLoss(FinetuningLoss):
             s_t, s_tk = groups["positive"]["embedding"], groups["positive"]["previous_embedding"]
             opposite = score(s_tk, s_t, position=s_t)
             parts["loss_positive"] = torch.relu(margin + opposite - score(s_t, s_tk)).mean()
-        return self.output(parts)
+        return parts
 # [/loss]
 
 
@@ -61,3 +65,22 @@ class MarginDirectionalLoss(FinetuningLoss):
 register_reward("d_sharp", sharpened_d3, kind="directional", image_input="concatenated",
                 options={"sharpness": 2.0, "margin": 0.1}, loss=MarginDirectionalLoss)
 # [/register]
+
+
+# [extend]
+class DecayedDirectionalLoss(DirectionalLoss):
+    """The thesis's directional loss (4.3.3) plus one term: ``decay`` times the squared norm of
+    the heads' parameters, which keeps them small. The built-in's terms come from
+    ``super().terms``, unchanged; the new one is named ``loss_*``, so ``forward`` adds it to
+    ``loss_directional`` and reports it beside the built-in's."""
+
+    def terms(self, tensordict):
+        terms = super().terms(tensordict)
+        squares = torch.stack([parameter.square().sum() for parameter in self.parameters()])
+        terms["loss_decay"] = self.reward.options["decay"] * squares.sum()
+        return terms
+
+
+register_reward("d3_decay", d3, kind="directional", image_input="concatenated",
+                options={"decay": 1e-3}, loss=DecayedDirectionalLoss)
+# [/extend]

@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> None:
                             max_episode_steps=args.steps)
 
     # [buffer]
-    buffer = EpisodeReplayBuffer(100_000, history=reward.k, reward=reward, batch_size=256)
+    buffer = EpisodeReplayBuffer(100_000, reward=reward, batch_size=256)
     expert = collect_successful_experts(args.task, seed=0, count=1, render=renders,
                                         image_size=64)[0]
     expert = embed_episode(expert, encoder)     # the env's embeddings, for the expert's states

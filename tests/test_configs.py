@@ -214,14 +214,16 @@ def test_an_older_run_resumes_with_the_current_defaults_for_its_missing_keys(tmp
 
 @pytest.fixture
 def example_reward_module():
-    """examples/my_directional_reward.py, which registers d_sharp; unregistered afterwards."""
+    """examples/my_directional_reward.py, which registers d_sharp and d3_decay; unregistered
+    afterwards."""
     import sys
 
     from temporal_torchrl.rewards import DIRECTIONAL, unregister_reward
     loaded = set(sys.modules)
     yield RECIPES.parent / "examples" / "my_directional_reward.py"
-    if "d_sharp" in DIRECTIONAL:
-        unregister_reward("d_sharp")
+    for name in ("d_sharp", "d3_decay"):
+        if name in DIRECTIONAL:
+            unregister_reward(name)
     for name in set(sys.modules) - loaded:
         if name.startswith("reward_module_"):
             del sys.modules[name]

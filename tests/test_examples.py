@@ -8,10 +8,12 @@ from pathlib import Path
 import pytest
 import sac_temporal
 import torch
+from helpers import synthetic_episode
 from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 
-from temporal_torchrl.objectives import finetuning_losses
+from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
+from temporal_torchrl.objectives import DirectionalLoss, finetuning_losses
 from temporal_torchrl.rewards import (
     DIRECTIONAL,
     POSITIONAL,
@@ -19,6 +21,7 @@ from temporal_torchrl.rewards import (
     reward_from_config,
     unregister_reward,
 )
+from temporal_torchrl.training import RewardHeadTrainer
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -52,12 +55,13 @@ def no_p5():
 
 @pytest.fixture
 def d_sharp():
-    """examples/my_directional_reward.py registers "d_sharp": its module (the recipe's import of
-    the file), and the registry left as it was found."""
+    """examples/my_directional_reward.py registers "d_sharp" and "d3_decay": its module (the
+    recipe's import of the file), and the registry left as it was found."""
     loaded = set(sys.modules)
     yield
-    if "d_sharp" in DIRECTIONAL:
-        unregister_reward("d_sharp")
+    for name in ("d_sharp", "d3_decay"):
+        if name in DIRECTIONAL:
+            unregister_reward(name)
     for name in set(sys.modules) - loaded:
         if name.startswith("reward_module_"):
             del sys.modules[name]
@@ -153,3 +157,35 @@ def test_own_loss_of_the_directional_example_by_hand(d_sharp):
     assert out["loss_positive"].item() == pytest.approx(expected_positive.item(), abs=1e-6)
     out["loss_directional"].backward()
     assert all(parameter.grad is not None for parameter in loss.parameters())
+
+
+def test_a_built_in_loss_plus_one_term_through_terms(d_sharp):
+    """The extending guide's DecayedDirectionalLoss (d3_decay): the built-in directional loss's
+    terms, unchanged, plus ``loss_decay``, all summed into ``loss_directional``; one trainer
+    update changes the heads and reports the new term."""
+    namespace = runpy.run_path(str(EXAMPLES / "my_directional_reward.py"))
+    torch.manual_seed(4)
+    dim = 4
+    reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional=None,
+                            directional="d3_decay", k=2, options={"decay": 0.5})
+    buffer = EpisodeReplayBuffer(capacity=100, reward=reward, gap=3)
+    for success in (None, torch.arange(20) >= 12):
+        buffer.extend(episode_rows(synthetic_episode(torch.randn(21, dim), success)))
+    goal = torch.randn(dim)
+    trainer = RewardHeadTrainer(reward, goal, buffer.finetuning, batch_size=8)
+    loss, = trainer.losses
+    assert isinstance(loss, namespace["DecayedDirectionalLoss"]) and trainer.stage == 2
+    heads = [parameter.detach().clone() for parameter in reward.directional_heads.parameters()]
+    batch = buffer.finetuning.sample(8)
+    out, built_in = loss(batch), DirectionalLoss(reward, goal, stage=2)(batch)
+    for name in ("loss_negative", "loss_positive"):
+        assert torch.equal(out[name], built_in[name])
+    squares = torch.stack([parameter.square().sum() for parameter in heads]).sum()
+    torch.testing.assert_close(out["loss_decay"], 0.5 * squares)
+    torch.testing.assert_close(out["loss_directional"],
+                               built_in["loss_directional"] + out["loss_decay"])
+    assert int(out["summed_parts"]) == 3
+    metrics = trainer.update()
+    assert metrics["loss_decay"] > 0
+    assert not all(torch.equal(before, after) for before, after in
+                   zip(heads, reward.directional_heads.parameters(), strict=True))

@@ -364,3 +364,45 @@ def test_directional_losses_refresh_the_certainty_references():
     assert memory.labels.tolist() == [-1.0, -1.0, 1.0, 1.0]
     torch.testing.assert_close(memory.directions, torch.eye(3)[[2, 2, 1, 1]])
     torch.testing.assert_close(memory.scales, torch.tensor([1e-8, 1.0]))
+
+
+@pytest.mark.parametrize("directional", ["d3", "d_certainty", "d_sequence"])
+@pytest.mark.parametrize("stage", [1, 2])
+def test_each_loss_sums_its_terms_exactly(directional, stage):
+    """``terms`` is the loss before the sum: ``forward`` returns each ``loss_*`` term (detached)
+    and the metrics as ``terms`` gives them, and ``loss_key`` is exactly their sum, bit for bit,
+    for every built-in loss in both stages (a stage-2 batch from a replay buffer)."""
+    from helpers import synthetic_episode
+
+    torch.manual_seed(9)
+    reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional="furl",
+                            directional=directional, k=2)
+    buffer = EpisodeReplayBuffer(capacity=300, reward=reward, gap=3,
+                                 window_length=reward.window_length)
+    for number in range(3):
+        success = torch.arange(20) >= 15 if number == 1 else None
+        buffer.extend(episode_rows(synthetic_episode(torch.randn(21, 4), success),
+                                   embedding_dtype=torch.float32))
+    batch = buffer.finetuning.sample(16)
+    for loss in finetuning_losses(reward, torch.randn(4), stage=stage):
+        terms = loss.terms(batch)
+        out = loss(batch)
+        parts = [name for name in terms if name.startswith("loss_")]
+        assert parts and int(out["summed_parts"]) == len(parts)
+        for name, value in terms.items():
+            assert torch.equal(out[name], value.detach()), name
+        assert torch.equal(out[loss.loss_key],
+                           torch.stack([terms[name] for name in parts]).sum())
+        assert out[loss.loss_key].requires_grad
+
+
+def test_a_term_named_like_the_sum_is_refused():
+    class Clashing(DirectionalLoss):
+        def terms(self, tensordict):
+            return {**super().terms(tensordict), self.loss_key: torch.zeros(())}
+
+    reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional=None)
+    with pytest.raises(ValueError, match=r"Clashing\.terms\(\) returned an entry named "
+                                         r"'loss_directional', the key of the loss's sum"):
+        Clashing(reward, torch.zeros(D), stage=1)(TensorDict({"negative": states([[1.0, 0.0]])},
+                                                             [1]))

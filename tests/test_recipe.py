@@ -326,6 +326,37 @@ def test_default_run_directories_differ_by_protocol_preset_and_seed():
     assert directories[7] == Path("runs/drawer-open/sac_stage2/seed0")
 
 
+def test_default_run_directories_tell_reward_options_apart():
+    """A reward's options add ``_opt<8 hex>`` after the baseline (the SHA-256 of their sorted
+    JSON), so configs that differ only in an option get their own directories; without options
+    the name is exactly as before, so existing runs keep their directories and resume."""
+    import hashlib
+
+    from temporal_torchrl.runs.naming import options_digest
+
+    def run_dir(*overrides):
+        with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+            return default_run_dir(compose("config", overrides=list(overrides)))
+
+    sharp = "reward.directional=d_sharp"
+    assert run_dir() == Path(
+        "runs/drawer-open/metaworld_small_furl+d3_rho1_lambda4_generic_stage1/seed0")
+    assert run_dir(sharp) == Path(
+        "runs/drawer-open/metaworld_small_furl+d_sharp_rho1_lambda4_generic_stage1/seed0")
+    two, four = (run_dir(sharp, f"+reward.options.sharpness={value}") for value in (2, 4))
+    assert options_digest({"sharpness": 2}) == "555184a7" == hashlib.sha256(
+        b'{"sharpness":2}').hexdigest()[:8]
+    assert two == Path("runs/drawer-open/metaworld_small_furl+d_sharp_rho1_lambda4_generic"
+                       "_opt555184a7_stage1/seed0")
+    assert four == Path(str(two).replace("555184a7", options_digest({"sharpness": 4})))
+    assert four != two
+    # One reward, one directory: the options' order and 2 for 2.0 change nothing.
+    assert run_dir(sharp, "+reward.options.sharpness=2.0") == two
+    assert options_digest({"sharpness": 2.0, "margin": 0.2}) == options_digest(
+        {"margin": 0.2, "sharpness": 2})
+    assert options_digest({"sharpness": 2.5}) != options_digest({"sharpness": 2})
+
+
 @pytest.mark.slow
 def test_rendering_with_random_liv_checkpoint(tmp_path):
     """A new user's command with a local LIV checkpoint: the output is the recipe's own lines,

@@ -14,6 +14,7 @@ from temporal_torchrl.data import (
     goal_image_embedding,
     transition_index,
 )
+from temporal_torchrl.encoders import load_encoder
 
 
 def all_transitions(buffer: EpisodeReplayBuffer) -> TensorDict:
@@ -241,6 +242,34 @@ def test_sac_batches_are_relabelled_by_the_reward_as_it_is_now():
         with torch.no_grad():
             for parameter in reward.parameters():
                 parameter.add_(1.0)
+
+
+def test_history_comes_from_the_reward_and_a_different_one_is_refused():
+    """k has one route: with a reward the buffer takes the reward's k (the env's history
+    transform's), and a different explicit ``history`` is refused, naming both values; so is a
+    reward-head trainer on a buffer of another k, and an env built with another k."""
+    from temporal_torchrl.envs import make_temporal_env
+    from temporal_torchrl.rewards import TemporalReward
+    from temporal_torchrl.training import RewardHeadTrainer
+
+    reward = TemporalReward(D, torch.randn(D), torch.randn(D), k=5)
+    assert EpisodeReplayBuffer(capacity=100, reward=reward).history == 5
+    assert EpisodeReplayBuffer(capacity=100, history=5, reward=reward).history == 5
+    assert EpisodeReplayBuffer(capacity=100).history == 5  # no reward: the default
+    message = (r"EpisodeReplayBuffer: history=3 but reward\.k=5: s_\(t-3\) here against the "
+               r"s_\(t-5\) of the reward's history transform\. Leave history out \(k is taken "
+               r"from the reward\) or build the reward with k=3\.")
+    with pytest.raises(ValueError, match=message):
+        EpisodeReplayBuffer(capacity=1000, history=3, reward=reward)
+    other = EpisodeReplayBuffer(capacity=100, history=3)
+    insert(other, 0, 10)
+    with pytest.raises(ValueError, match=r"RewardHeadTrainer: the replay's history k=3 but "
+                                         r"reward\.k=5.*EpisodeReplayBuffer\(\.\.\., "
+                                         r"reward=reward\)"):
+        RewardHeadTrainer(reward, torch.randn(D), other.finetuning)
+    with pytest.raises(ValueError, match=r"make_temporal_env: history=3 but reward\.k=5"):
+        make_temporal_env("drawer-open", encoder=load_encoder("state", dim=D), reward=reward,
+                          history=3)
 
 
 def test_buffer_state_round_trips_through_torchrl_dumps_and_loads(tmp_path):

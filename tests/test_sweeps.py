@@ -109,6 +109,33 @@ def test_the_example_sweep_runs_and_reports(tmp_path):
     assert (out / "success_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
+def test_a_sweep_over_a_reward_option_makes_a_run_per_value(tmp_path):
+    """``-m +reward.options.sharpness=2,4`` with the extending guide's d_sharp: the two jobs
+    differ only in the option, whose digest names their directories, so both run (before, the
+    second found the first's run and stopped with a RunConflictError)."""
+    from temporal_torchrl.runs.naming import options_digest
+
+    sweep = tmp_path / "sweep"
+    result = subprocess.run(
+        [sys.executable, str(RECIPES / "sac_temporal.py"), "-m", f"hydra.sweep.dir={sweep}",
+         *QUICK, "train.episodes=1", "train.threads=1",
+         f"reward.modules=[{EXAMPLES / 'my_directional_reward.py'}]",
+         "reward.directional=d_sharp", "+reward.options.sharpness=2,4"],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    runs = sorted(path.parent for path in sweep.rglob("config.json"))
+    method = "drawer-open/state_furl+d_sharp_rho1_lambda4_generic"
+    expected = {f"{method}_opt{options_digest({'sharpness': value})}_stage1/seed0": value
+                for value in (2, 4)}
+    assert sorted(run.relative_to(sweep).as_posix() for run in runs) == sorted(expected)
+    for run in runs:
+        config = json.loads((run / "config.json").read_text())
+        assert config["reward"]["options"] == {
+            "sharpness": expected[run.relative_to(sweep).as_posix()]}
+        assert json.loads((run / "summary.json").read_text())["episodes"] == 1
+
+
 def test_a_sweep_job_resumes_restarts_or_leaves_alone_what_it_finds(tmp_path, capsys):
     from temporal_torchrl.runs import RunDirectory, run_directory, sweep_job_config
 

@@ -112,7 +112,7 @@ def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path, stage):
                               embedding_dtype=torch.float32))
     cfg = config(tmp_path, "reward.directional=d3", "compile.enabled=true")
     reward = make_temporal_reward("drawer-open", load_encoder("state", dim=4),
-                                  positional="furl", directional="d3")
+                                  positional="furl", directional="d3", k=buffer.history)
     trainer = factories.make_reward_trainer(cfg, reward, torch.ones(4), buffer)
     batch = buffer.finetuning.sample(16)
     assert trainer.stage == stage

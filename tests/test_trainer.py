@@ -25,7 +25,7 @@ def filled_buffer(gap: int = 5) -> EpisodeReplayBuffer:
 def make_trainer(buffer: EpisodeReplayBuffer, seed: int = 0) -> RewardHeadTrainer:
     torch.manual_seed(seed)
     reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
-                            directional="d3")
+                            directional="d3", k=buffer.history)
     return RewardHeadTrainer(reward, torch.full((D,), 25.0), buffer.finetuning, batch_size=8,
                              lr=LR, delta=DELTA)
 

@@ -278,7 +278,8 @@ class RecipeConfig:
     compile: CompileConfig = field(default_factory=CompileConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     #: The run directory; null:
-    #: ``<runs_dir>/<task>/<encoder>_<pos>+<dir>_rho<r>_lambda<l>_<baseline>_<protocol>/seed<s>``.
+    #: ``<runs_dir>/<task>/<encoder>_<pos>+<dir>_rho<r>_lambda<l>_<baseline>_<protocol>/seed<s>``
+    #: (``runs.default_run_dir``).
     output_dir: str | None = None
     #: The root of the default run directories; null: ``runs/``, or in a ``-m`` sweep the sweep
     #: directory (hydra.sweep.dir).

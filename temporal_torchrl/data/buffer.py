@@ -70,7 +70,8 @@ from temporal_torchrl.data.layouts import FinetuningLayout, TransitionLayout
 from temporal_torchrl.data.samplers import FinetuningSampler, TransitionSampler
 from temporal_torchrl.data.storage import EpisodeStorage
 from temporal_torchrl.data.writer import EpisodeWriter
-from temporal_torchrl.defaults import GAP, HISTORY, LABEL_WINDOW
+from temporal_torchrl.defaults import GAP, LABEL_WINDOW
+from temporal_torchrl.rewards.temporal import TemporalReward, history_offset
 
 
 class EpisodeReplayBuffer(ReplayBuffer):
@@ -85,6 +86,10 @@ class EpisodeReplayBuffer(ReplayBuffer):
         capacity: number of stored rows; an episode of ``T`` transitions takes ``T + 1`` rows
             (one per state), so 500 transitions per episode use 0.2 % more than ``T`` rows.
         history: ``k``, the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3).
+            With a ``reward`` leave it out: k is the reward's ``k``, the one the env's history
+            transform uses, and a different value is refused (the relabelled batches would read
+            another s_{t-k} than the env wrote). Without a reward, default
+            :data:`~temporal_torchrl.defaults.HISTORY`.
         window_length: K (>= 2): batches also carry ``"embedding_window"``, the last K
             embeddings of each state (the reward's ``window_length``; None: no window).
         label_window, gap: the finetuning sampler's (:class:`FinetuningSampler`).
@@ -99,10 +104,10 @@ class EpisodeReplayBuffer(ReplayBuffer):
             the storage's. From a CPU storage to a GPU, batches go through pinned memory.
     """
 
-    def __init__(self, capacity: int, *, history: int = HISTORY,
+    def __init__(self, capacity: int, *, history: int | None = None,
                  window_length: int | None = None, label_window: int | None = LABEL_WINDOW,
                  gap: int = GAP, permanent_episodes: int = 0,
-                 reward: torch.nn.Module | None = None, batch_size: int | None = None,
+                 reward: TemporalReward | None = None, batch_size: int | None = None,
                  finetuning_batch_size: int | None = None,
                  device: torch.device | str = "cpu",
                  batch_device: torch.device | str | None = None) -> None:
@@ -110,6 +115,7 @@ class EpisodeReplayBuffer(ReplayBuffer):
 
         if capacity < 2:
             raise ValueError(f"capacity={capacity} must be >= 2 rows (one episode of one step).")
+        history = history_offset(history, reward, "EpisodeReplayBuffer")
         storage = EpisodeStorage(capacity, device=device)
         writer = EpisodeWriter(permanent_episodes)
         transforms = [TransitionLayout(window_length, batch_device)]

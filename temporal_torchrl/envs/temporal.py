@@ -15,10 +15,10 @@ from typing import Any
 import torch
 from torchrl.envs import EnvBase, ParallelEnv, TransformedEnv
 
-from temporal_torchrl.defaults import HISTORY
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.metaworld_env import make_env
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.rewards.temporal import history_offset
 from temporal_torchrl.transforms import (
     EmbeddingHistoryTransform,
     EmbeddingTransform,
@@ -49,7 +49,8 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
         encoder: embeds each state into ``"embedding"``; None: no VLM transforms.
         reward: appended as a :class:`~temporal_torchrl.transforms.TemporalRewardTransform`;
             None: the env stops at the history (embeddings only).
-        history: k when there is no reward (default 5).
+        history: k when there is no reward (default 5); with a reward, k is the reward's
+            ``k`` and a different ``history`` is refused.
         image_size, camera, fast_render, max_episode_steps: as in
             :func:`~temporal_torchrl.envs.make_env`.
         num_envs: copies of the task stepped in parallel (batch size ``[num_envs]``); 1: a
@@ -70,6 +71,7 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     """
     if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs={num_envs!r}; expected an integer >= 1.")
+    k = history_offset(history, reward, "make_temporal_env")  # refused before any env is built
     render = encoder is not None and encoder.input_key == "pixels"
     if render:
         encoder.check_frame_size(image_size)
@@ -92,7 +94,6 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     if not isinstance(env, TransformedEnv):
         env = TransformedEnv(env)
     env.append_transform(EmbeddingTransform(encoder))
-    k = reward.k if reward is not None else (history or HISTORY)
     window = reward.window_length if reward is not None else None
     env.append_transform(EmbeddingHistoryTransform(k=k, window_length=window))
     if reward is not None:

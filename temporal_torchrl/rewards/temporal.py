@@ -35,6 +35,25 @@ def check_window_length(window_length: int | None, *, optional: bool = False) ->
                          "embeddings s_(t-K+1) .. s_t).")
 
 
+def history_offset(history: int | None, reward: TemporalReward | None, where: str) -> int:
+    """k for a part that builds histories beside ``reward`` (the env's history transform, the
+    replay buffer): the reward's own ``k`` when there is a reward, so k has one route and the
+    s_(t-k) the env writes, the replay relabels with and the losses train on is the same one;
+    ``history`` (default :data:`~temporal_torchrl.defaults.HISTORY`) without a reward.
+
+    Raises:
+        ValueError: ``history`` given and not the reward's ``k``; ``where`` names the caller.
+    """
+    if reward is None:
+        return defaults.HISTORY if history is None else history
+    if history is not None and history != reward.k:
+        raise ValueError(
+            f"{where}: history={history!r} but reward.k={reward.k}: s_(t-{history}) here against "
+            f"the s_(t-{reward.k}) of the reward's history transform. Leave history out (k is "
+            f"taken from the reward) or build the reward with k={history}.")
+    return reward.k
+
+
 class TemporalReward(nn.Module):
     """Positional and directional VLM rewards added to the sparse task reward (thesis 4.1):
 

@@ -82,10 +82,11 @@ DEVICE_KEYS = ("encoder.device", "train.device", "replay_buffer.device")
 class RunConflictError(ValueError):
     """A run asked for values that differ from those of the run already in its directory.
 
-    A run directory holds one run, named by what presets and protocols change (task, encoder,
-    reward, rho, lambda, baseline, protocol, seed), so two runs that differ only in another key
-    (``sac.lr``, ``reward.alpha``, ...) map to one directory: the second would resume the first
-    instead of running. ``conflicts`` maps each such key to (asked for, in the directory).
+    A run directory holds one run, named by what presets and protocols change and by the reward's
+    own options (:data:`~temporal_torchrl.runs.naming.NAMED_BY`), so two runs that differ only
+    in another key (``sac.lr``, ``reward.alpha``, ...) map to one directory: the second would
+    resume the first instead of running. ``conflicts`` maps each such key to (asked for, in
+    the directory).
     """
 
     def __init__(self, path: Path, conflicts: dict[str, tuple[Any, Any]],

@@ -215,9 +215,10 @@ def make_replay_buffer(cfg: DictConfig, capacity: int,
                        reward: TemporalReward | None) -> EpisodeReplayBuffer:
     """Whole episodes on ``replay_buffer.device``; ``sample()`` gives SAC batches on
     ``train.device`` relabelled by ``reward``'s current heads, ``finetuning.sample()`` the heads'
-    batches; the preloaded experts are permanent."""
+    batches; the preloaded experts are permanent. k and the window come from ``reward``, as
+    the env's history transform takes them (``reward.k`` without a reward)."""
     return EpisodeReplayBuffer(
-        capacity, history=cfg.reward.k,
+        capacity, history=cfg.reward.k if reward is None else None,
         window_length=reward.window_length if reward is not None else None,
         label_window=cfg.reward.label_window, gap=cfg.reward.gap,
         permanent_episodes=cfg.train.preload_positives, reward=reward,

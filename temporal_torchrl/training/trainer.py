@@ -32,7 +32,8 @@ class RewardHeadTrainer:
     Args:
         reward: the reward whose heads are trained (in place).
         goal_image_embedding: s_g ``[D]``, the first success state of an expert episode.
-        replay: the buffer the finetuning batches come from.
+        replay: the buffer the finetuning batches come from; its history k must be
+            ``reward.k`` (else a ValueError).
         batch_size: states per group (``reward.batch_size``).
         lr, delta, l2_margin, same_position: ``reward.lr``, and the losses' settings of the
             same names.
@@ -44,8 +45,8 @@ class RewardHeadTrainer:
         >>> from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
         >>> D, T = 8, 20
         >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
-        ...                         directional=None)
-        >>> buffer = EpisodeReplayBuffer(100, history=2)
+        ...                         directional=None, k=2)
+        >>> buffer = EpisodeReplayBuffer(100, history=reward.k)
         >>> episode = TensorDict({"embedding": torch.randn(T, D), "action": torch.rand(T, 4),
         ...     "next": {"embedding": torch.randn(T, D),
         ...              "success": torch.zeros(T, 1, dtype=torch.bool)}}, [T])
@@ -64,6 +65,14 @@ class RewardHeadTrainer:
                  compile_mode: str | None = None) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size={batch_size!r}; expected an integer >= 1.")
+        history = getattr(replay.sampler, "history", reward.k)
+        if history != reward.k:
+            raise ValueError(
+                f"RewardHeadTrainer: the replay's history k={history} but reward.k={reward.k}: "
+                f"the losses would train directions s_t - s_(t-{history}) while the env's "
+                f"history transform gives the reward s_t - s_(t-{reward.k}). Build the buffer "
+                "with the reward, EpisodeReplayBuffer(..., reward=reward), or with "
+                "history=reward.k.")
         self.reward = reward
         self.replay = replay
         self.batch_size = batch_size

@@ -36,6 +36,10 @@ class FinetuningLoss(LossModule):
     ``same_position``); :meth:`from_settings` builds it. Its hyperparameters are the reward's
     options (``self.reward.options``), so a config sets them as ``reward.options.<name>``.
 
+    A loss implements :meth:`terms`, its named terms before they are summed, and :meth:`forward`
+    sums them; so a loss "built-in plus one term" is a subclass whose ``terms`` adds its term to
+    ``super().terms(tensordict)``, with no copy of the built-in's equations.
+
     Args:
         reward: the reward whose heads are trained.
         heads: those heads (``reward.positional_heads`` or ``reward.directional_heads``).
@@ -92,6 +96,29 @@ class FinetuningLoss(LossModule):
         if pair is not None:
             groups.update(later=pair["later"], earlier=pair["earlier"])
         return groups
+
+    def terms(self, tensordict: TensorDictBase) -> dict[str, Tensor]:
+        """The loss's named terms for one batch, before :meth:`forward` sums them: every entry
+        named ``loss_*`` is a term (a scalar with gradients into the heads), any other a metric
+        passed on as it is (TorchRL's convention for a loss module's output). A term whose
+        group is absent from the batch (:meth:`groups`) is left out. Extend a loss by
+        overriding this: ``terms = super().terms(tensordict)``, then add a ``loss_*`` entry."""
+        raise NotImplementedError(
+            f"{type(self).__name__} implements neither terms() nor forward(); a FinetuningLoss "
+            "returns its named terms from terms(tensordict) and forward() sums them.")
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDict:
+        """Losses for one batch (:meth:`output`): :attr:`loss_key`, the sum of the ``loss_*``
+        entries of :meth:`terms` (to minimise), each term detached, the metrics,
+        ``stage`` and ``summed_parts``."""
+        terms = self.terms(tensordict)
+        if self.loss_key in terms:
+            raise ValueError(
+                f"{type(self).__name__}.terms() returned an entry named {self.loss_key!r}, the "
+                "key of the loss's sum; name each term after its part, e.g. 'loss_<part>'.")
+        parts = {name: value for name, value in terms.items() if name.startswith("loss_")}
+        metrics = {name: value for name, value in terms.items() if name not in parts}
+        return self.output(parts, metrics)
 
     def output(self, parts: dict[str, Tensor],
                extra: dict[str, Tensor] | None = None) -> TensorDict:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from torch import Tensor
 
 from temporal_torchrl.objectives.finetuning.base import FinetuningLoss
@@ -66,13 +66,14 @@ class CertaintyLoss(FinetuningLoss):
                              "certainty target is defined for one direction s_t - s_(t-k).")
         super().__init__(reward, reward.directional_heads, goal_image_embedding, stage=stage)
 
-    def forward(self, tensordict: TensorDictBase) -> TensorDict:
-        """Losses for one batch: ``loss_certainty`` (to minimise), its parts, the mean targets
-        of the observed directions, ``stage`` and ``summed_parts``."""
+    def terms(self, tensordict: TensorDictBase) -> dict[str, Tensor]:
+        """The terms for one batch, ``loss_certainty_<group>`` of each labelled group
+        (``loss_certainty`` is their sum), and the metrics ``target_<group>``, the mean target
+        of the group's observed directions."""
         groups = _labelled(self.groups(tensordict))
         remember_certainty_references(self.reward, groups)
         if not groups:
-            return self.output({})
+            return {}
         positions, directions, labels = _references(groups)
         scales = reference_scales(positions, directions)
 
@@ -99,7 +100,7 @@ class CertaintyLoss(FinetuningLoss):
                 (observed - observed_target).pow(2).mean()
                 + (contrasted - certainty(s_t, end - s_t)).pow(2).mean())
             out[f"target_{name}"] = observed_target.mean()
-        return self.output(parts, out)
+        return {**parts, **out}
 
 
 def remember_certainty_references(reward: TemporalReward,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from torch import Tensor
 
 from temporal_torchrl.defaults import SAME_POSITION
@@ -60,9 +60,9 @@ class DirectionalLoss(FinetuningLoss):
         super().__init__(reward, reward.directional_heads, goal_image_embedding, stage=stage)
         self.same_position = same_position
 
-    def forward(self, tensordict: TensorDictBase) -> TensorDict:
-        """Losses for one batch: ``loss_directional`` (to minimise), the parts, ``stage`` and
-        ``summed_parts``."""
+    def terms(self, tensordict: TensorDictBase) -> dict[str, Tensor]:
+        """The terms for one batch (``loss_directional`` is their sum): ``loss_negative``
+        (L^D_neg), and in stage 2 ``loss_positive`` (L^D_pos)."""
         groups = self.groups(tensordict)
         remember_certainty_references(self.reward, groups)
         # The release scores the contrasted direction at the plain position n(s_t): D3's input.
@@ -94,7 +94,7 @@ class DirectionalLoss(FinetuningLoss):
         if positive is not None:
             parts["loss_positive"] = (rewards["opposite"].mean()
                                       - rewards["positive_observed"].mean())
-        return self.output(parts)
+        return parts
 
     def _score(self, terms: dict[str, _DirectionTerm]) -> dict[str, Tensor]:
         """r_D of every term, with one reward call per variant for the observed terms (the

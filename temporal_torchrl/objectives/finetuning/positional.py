@@ -73,9 +73,9 @@ class PositionalRankingLoss(FinetuningLoss):
         return self.reward.positional_reward(states["embedding"], states["initial_embedding"],
                                              states["previous_embedding"])
 
-    def forward(self, tensordict: TensorDictBase) -> TensorDict:
-        """Losses for one batch: ``loss_positional`` (to minimise), the parts, ``stage`` and
-        ``summed_parts``."""
+    def terms(self, tensordict: TensorDictBase) -> dict[str, Tensor]:
+        """The terms for one batch (``loss_positional`` is their sum): ``loss_neg_neg`` in
+        stage 1; ``loss_pos_neg`` and ``loss_pos_pos`` in stage 2."""
         groups = self.groups(tensordict)
         rewards = _split_call(self.positional_reward, groups, POSITIONAL_KEYS)
         parts = {}
@@ -93,7 +93,7 @@ class PositionalRankingLoss(FinetuningLoss):
             if "later" in rewards:
                 parts["loss_pos_pos"] = ranking_loss(rewards["later"], rewards["earlier"],
                                                      self.delta).mean()
-        return self.output(parts)
+        return parts
 
 
 def _split_call(function: Callable[[TensorDictBase], Tensor],
