@@ -12,7 +12,7 @@ each task weighted alike whatever its number of runs. This module computes:
 - :func:`mean_difference_over_tasks`: Δ itself;
 - :func:`stratified_permutation_test`: the plan's test. Within each task the pooled runs of X
   and Y are shuffled between the two labels (each side keeping its count), the tasks
-  independently; two-sided p = (1 + #{|Δ*| >= |Δ|}) / (1 + permutations);
+  independently; two-sided p = (1 + #{abs(Δ*) >= abs(Δ)}) / (1 + permutations);
 - :func:`exact_stratified_permutation_test`: the same test over every relabelling, for small
   cases and as an independent check of the Monte Carlo one;
 - :func:`stratified_bootstrap_interval`: the percentile interval of Δ with runs resampled with
@@ -23,7 +23,7 @@ each task weighted alike whatever its number of runs. This module computes:
 Reproducibility: the tasks are taken in sorted order and each function draws from its own
 ``numpy.random.default_rng(seed)`` (seed 20261207 by default, the plan's), task by task in that
 order, so a result depends on the data, the seed and the count only, not on the mappings'
-insertion order. "At least as extreme" is ``|Δ*| >= |Δ| - 1e-12``: the relabelling that
+insertion order. "At least as extreme" is ``abs(Δ*) >= abs(Δ) - 1e-12``: the relabelling that
 reproduces the data must count although its Δ* is summed in another order.
 
 Example:
@@ -127,7 +127,7 @@ def stratified_permutation_test(x: Runs, y: Runs, *, permutations: int = 100_000
 
     Under the null hypothesis X's and Y's runs on a task are exchangeable, so each draw shuffles
     the pooled runs of every task between the labels (X keeping its count), the tasks
-    independently, and recomputes Δ*. Two-sided p = (1 + #{|Δ*| >= |Δ|}) / (1 + permutations),
+    independently, and recomputes Δ*. Two-sided p = (1 + #{abs(Δ*) >= abs(Δ)}) / (1 + permutations),
     which counts the data as one of the relabellings and so is never 0. Vectorised: one
     ``rng.permuted`` call per task (sorted order) on ``permutations`` copies of its pooled runs.
     """
@@ -152,8 +152,9 @@ def exact_stratified_permutation_test(x: Runs, y: Runs, *,
     """:func:`stratified_permutation_test` over every relabelling instead of random ones.
 
     There are prod over tasks of C(n_X + n_Y, n_X) relabellings, each equally likely under the
-    null, so p = #{|Δ*| >= |Δ|} / total exactly. Feasible for small cases only (ValueError above
-    ``max_relabellings``); it checks the Monte Carlo test and gives small designs their exact p.
+    null, so p = #{abs(Δ*) >= abs(Δ)} / total exactly. Feasible for small cases only (ValueError
+    above ``max_relabellings``); it checks the Monte Carlo test and gives small designs their
+    exact p.
     """
     shared = _shared_runs(x, y)
     total = math.prod(math.comb(xs.size + ys.size, xs.size) for _, xs, ys in shared)
@@ -202,7 +203,7 @@ def paired_sign_flip_test(x: Runs, y: Runs, *, permutations: int = 100_000,
 
     Under the null each seed's X - Y difference is symmetric about 0, so flipping signs
     independently gives Δ*'s null distribution. With P pairs, every one of the 2^P assignments
-    is enumerated when 2^P <= ``permutations`` (p = #{|Δ*| >= |Δ|} / 2^P), otherwise
+    is enumerated when 2^P <= ``permutations`` (p = #{abs(Δ*) >= abs(Δ)} / 2^P), otherwise
     ``permutations`` random ones are drawn (p = (1 + count) / (1 + permutations)). Raises
     ValueError when X and Y have different numbers of runs on a task.
     """

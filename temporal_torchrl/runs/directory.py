@@ -281,8 +281,8 @@ class RunDirectory:
         self.positives.truncate(episodes + 1)
 
     def record_start(self, entry: Mapping[str, Any]) -> None:
-        """Add one start's provenance entry (:func:`~temporal_torchrl.runs.provenance.
-        current_provenance`) to ``provenance.json``."""
+        """Add one start's provenance entry
+        (:func:`~temporal_torchrl.runs.provenance.current_provenance`) to ``provenance.json``."""
         self._write_provenance([*self.provenance(), dict(entry)])
 
     def provenance(self) -> list[dict[str, Any]]:
