@@ -22,6 +22,7 @@ from torchrl.envs.utils import ExplorationType
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from torchrl.record.loggers import CSVLogger, Logger, WandbLogger
 
+from temporal_torchrl import defaults
 from temporal_torchrl.configs.rules import resolve_device
 from temporal_torchrl.data import (
     EpisodeReplayBuffer,
@@ -31,11 +32,7 @@ from temporal_torchrl.data import (
     goal_image_from_rows,
 )
 from temporal_torchrl.encoders import Encoder, load_encoder
-from temporal_torchrl.envs import (
-    EXPERT_MAX_STEPS,
-    collect_successful_experts,
-    make_temporal_env,
-)
+from temporal_torchrl.envs import collect_successful_experts, make_temporal_env
 from temporal_torchrl.envs.task_reward import task_text_embeddings
 from temporal_torchrl.modules import ReLU
 from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
@@ -104,7 +101,7 @@ def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
         cfg.env.task, cfg.env.seed, count,
         render=encoder is not None and encoder.input_key == "pixels",
         image_size=cfg.env.image_size, camera=cfg.env.camera, fast_render=cfg.env.fast_render,
-        max_episode_steps=max(cfg.env.max_episode_steps, EXPERT_MAX_STEPS),
+        max_episode_steps=max(cfg.env.max_episode_steps, defaults.MAX_EPISODE_STEPS),
         steps_after_success=cfg.train.expert_steps_after_success, goal=cfg.env.goal)
     return [embed_episode(episode, encoder) if encoder is not None else episode
             for episode in experts]
