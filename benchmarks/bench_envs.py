@@ -24,10 +24,10 @@ import numpy as np
 from _common import parse_args, rate, report
 from metaworld.env_dict import ALL_V3_ENVIRONMENTS_GOAL_HIDDEN
 
+from temporal_torchrl.defaults import CAMERA
 from temporal_torchrl.envs import make_env
 
 TASK = "push"
-CAMERA = "corner2"
 SIZE = 224
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import torch
 from PIL import Image
 
+from temporal_torchrl import defaults
 from temporal_torchrl.envs import (
     EVALUATION_TASKS,
     collect_expert_episodes,
@@ -29,7 +30,7 @@ def main() -> None:
                         help=f"short Metaworld task name (evaluation tasks: {EVALUATION_TASKS})")
     parser.add_argument("--seed", type=int, default=0, help="layout seed")
     parser.add_argument("--image-size", type=int, default=224)
-    parser.add_argument("--camera", default="corner2")
+    parser.add_argument("--camera", default=defaults.CAMERA)
     parser.add_argument("--frames", type=int, default=5, help="random-action frames to render")
     parser.add_argument("--output-dir", default="outputs/demo")
     args = parser.parse_args()

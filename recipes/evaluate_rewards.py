@@ -38,6 +38,7 @@ from omegaconf import DictConfig, OmegaConf
 from temporal_torchrl.configs.rules import (
     config_tasks,
     config_variants,
+    resolve_device,
     validate_reward_quality_config,
 )
 from temporal_torchrl.data import EpisodeReplayBuffer
@@ -172,7 +173,7 @@ def evaluate(cfg: DictConfig, command: str | None = None) -> list[dict]:
     if cfg.threads is not None:
         torch.set_num_threads(cfg.threads)
     command = command or "python recipes/evaluate_rewards.py (config composed in code)"
-    encoder = factories.make_encoder(cfg)
+    encoder = factories.make_encoder(cfg, resolve_device(cfg.encoder.device))
     print(factories.describe_encoder(cfg, encoder), flush=True)
     results = []
     for task in config_tasks(cfg):

@@ -45,7 +45,7 @@ from torchrl import timeit
 from torchrl.collectors import Collector
 from tqdm import tqdm
 
-from temporal_torchrl.configs.rules import validate_recipe_config
+from temporal_torchrl.configs.rules import Devices, validate_recipe_config
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.rewards.config import uses_vlm_reward
@@ -119,11 +119,12 @@ def build(start: RunStart, run_dir: RunDirectory) -> Training:
     ``start`` begins, its replay filled and, on a resume, its checkpoint restored. The order is
     that of the build's random draws, which a resume must repeat."""
     cfg, saved = start.cfg, start.checkpoint  # saved: None on a fresh start
+    devices = Devices.of(cfg)  # each part's device, resolved once for all the factories
     torch.manual_seed(cfg.env.seed)
 
     # ---- encoder, reward, env
-    encoder = factories.make_encoder(cfg) if uses_vlm_reward(cfg) else None
-    reward = factories.make_reward(cfg, encoder) if encoder is not None else None
+    encoder = factories.make_encoder(cfg, devices.encoder) if uses_vlm_reward(cfg) else None
+    reward = factories.make_reward(cfg, encoder, devices) if encoder is not None else None
     env = factories.make_environment(cfg, encoder, reward)
     print(f"run directory: {run_dir.path}")
     if saved is not None:  # a killed run's log shows where it went on from
@@ -141,17 +142,17 @@ def build(start: RunStart, run_dir: RunDirectory) -> Training:
         preloaded, goal_image, expert_rows = [], saved.goal_image, saved.expert_rows
 
     # ---- SAC, replay buffer, reward-head trainer
-    actor, critics = factories.make_sac_agent(cfg, env)
+    actor, critics = factories.make_sac_agent(cfg, env, devices)
     sac_loss, sac_optimizer = factories.make_sac_loss(cfg, actor, critics,
                                                       env.action_spec.shape[-1])
     update_sac = factories.make_sac_update(cfg, sac_loss, sac_optimizer)
     buffer = factories.make_replay_buffer(cfg, factories.replay_capacity(
-        cfg, expert_rows, saved=saved.buffer_capacity if saved else None), reward)
+        cfg, expert_rows, saved=saved.buffer_capacity if saved else None), reward, devices)
     trainer = factories.make_reward_trainer(cfg, reward, goal_image, buffer) if finetune else None
 
     # ---- the replay filled, the relay, then the checkpoint's modules and counters restored
     progress = start.fill_replay(buffer, preloaded)
-    relay = factories.make_relay(cfg, env, actor, buffer.num_positive_states, finetune)
+    relay = factories.make_relay(cfg, env, actor, buffer.num_positive_states, finetune, devices)
     state = TrainingState(progress, sac_loss=sac_loss, sac_optimizer=sac_optimizer,
                           reward=reward, trainer=trainer, relay=relay, goal_image=goal_image,
                           buffer_capacity=buffer.capacity, expert_rows=expert_rows,
@@ -159,9 +160,10 @@ def build(start: RunStart, run_dir: RunDirectory) -> Training:
     start.restore(state)
     print(f"relay exploration: {factories.describe_relay(cfg, relay)}")
     collector = factories.make_collector(cfg, env, relay.policy,
-                                         max(0, cfg.train.random_steps - progress.env_steps))
+                                         max(0, cfg.train.random_steps - progress.env_steps),
+                                         devices)
     random_until = progress.env_steps + collector.init_random_frames
-    evaluation = factories.make_evaluation(cfg)
+    evaluation = factories.make_evaluation(cfg, devices)
     start.restore_rng()  # after every random draw the build makes
     return Training(encoder, buffer, trainer, relay, actor, evaluation, update_sac, state,
                     collector, random_until, factories.make_logger(cfg, run_dir.path))

@@ -8,6 +8,11 @@ composed from the API with its defaults is the one ``recipes/sac_temporal.py`` t
 own, the thesis's best, FuRL with D3 at rho 1, lambda 4 (section 5.3.3, Table 5.12). The thesis's
 other configurations are the recipe's presets (``recipes/preset/``).
 
+The env's and the scripted experts' settings (camera, episode length, goal setting) and the
+offline reward-quality benchmark's dataset are here too: the library's signatures, the recipes'
+schemas and :class:`~temporal_torchrl.reward_quality.DatasetSpec` read them, so a quantity has
+one value whichever door it comes in by.
+
 The module imports nothing, so the config schemas stay free of torch.
 """
 
@@ -71,8 +76,38 @@ RELAY_NOISE = 0.2
 RELAY_THRESHOLD = 2500
 #: ``env.goal``: one layout per run, restored at every reset (the thesis's protocol), or a new
 #: layout at every reset (Metaworld's benchmark setting, FuRL's; the thesis's section 6).
-GOALS = ("fixed", "random")
-GOAL = "fixed"
+FIXED_GOAL = "fixed"
+GOALS = (FIXED_GOAL, "random")
+GOAL = FIXED_GOAL
 #: Evaluation episodes of the deterministic policy per evaluation (FuRL's code: 10 on random
 #: goals).
 EVAL_EPISODES = 10
+
+#: The Metaworld camera rendered (the prior implementations').
+CAMERA = "corner2"
+#: Steps per episode: Metaworld's truncation and the thesis protocol's episode length; a
+#: scripted expert is given at least this many to succeed, however short the run's episodes.
+MAX_EPISODE_STEPS = 500
+#: Shadows, reflections and MSAA off when rendering (about 8x faster on a CPU).
+FAST_RENDER = True
+#: The side of the recipes' rendered frames (the package's small encoder reads 64x64). The
+#: library's render signatures default to 224, CLIP's input size, for an encoder-agnostic call.
+IMAGE_SIZE = 64
+#: Preloaded positive episodes of the thesis's second stage (section 5.1).
+STAGE2_POSITIVES = 50
+#: The scripted experts' action noise (the stage-2 preloaded positives').
+EXPERT_NOISE = 0.1
+#: A scripted-expert episode is cut this many steps after its first success.
+EXPERT_STEPS_AFTER_SUCCESS = 5
+
+# The offline reward-quality benchmark's dataset (``DatasetSpec``, ``dataset.*``).
+#: Successful scripted-expert episodes (the positives).
+DATASET_EXPERT_EPISODES = 16
+#: Failed episodes of uniform random actions.
+DATASET_RANDOM_EPISODES = 6
+#: Failed episodes of the scripted expert with a large action noise.
+DATASET_FAILED_EXPERT_EPISODES = 6
+#: The failed experts' initial action noise (doubled while most of their episodes succeed).
+DATASET_FAILURE_NOISE = 2.0
+#: Episodes tried per episode wanted, for each kind, before giving up.
+DATASET_MAX_ATTEMPTS = 10

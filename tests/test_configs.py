@@ -9,13 +9,18 @@ import json
 import re
 
 import pytest
+import torch
 from helpers import RECIPES, error_chain
 from hydra import compose, initialize_config_dir
 from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
 from temporal_torchrl.configs import RecipeConfig, RewardQualityConfig
-from temporal_torchrl.configs.rules import validate_recipe_config, validate_reward_quality_config
+from temporal_torchrl.configs.rules import (
+    Devices,
+    validate_recipe_config,
+    validate_reward_quality_config,
+)
 from temporal_torchrl.runs import resumed_config
 
 
@@ -173,6 +178,18 @@ def test_a_value_out_of_range_is_refused_naming_the_key(override, message):
     with pytest.raises(ValueError) as error:
         validate_recipe_config(cfg)
     assert message in str(error.value)
+
+
+def test_devices_are_resolved_once_and_the_config_keeps_their_names():
+    """``auto`` for the encoder and the replay is the train device, resolved in one place for
+    every factory; the validated config (config.json, the run directory, the resume checks)
+    keeps the names as given. A device torch cannot use is refused naming its key."""
+    cfg = validate_recipe_config(composed("config", "train.device=cpu",
+                                          "replay_buffer.device=auto"))
+    assert Devices.of(cfg) == Devices(*[torch.device("cpu")] * 3)
+    assert (cfg.encoder.device, cfg.replay_buffer.device) == ("auto", "auto")
+    with pytest.raises(ValueError, match=r"config replay_buffer\.device='tpu' is invalid"):
+        Devices.of(composed("config", "replay_buffer.device=tpu"))
 
 
 def test_the_reward_quality_ranges_are_its_own():

@@ -38,6 +38,7 @@ from helpers import config, make_episode
 from tensordict import TensorDict
 from torch.utils._python_dispatch import TorchDispatchMode
 
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.encoders import LIVEncoder, load_encoder, save_random_liv_checkpoint
 from temporal_torchrl.envs import make_temporal_reward
@@ -108,7 +109,7 @@ def sac_updates_on(device: str, tmp_path: Path, updates: int = 3
     try:
         batches = [env.rollout(16, break_when_any_done=False) for _ in range(updates)]
         torch.manual_seed(0)
-        actor, critics = factories.make_sac_agent(cfg, env)
+        actor, critics = factories.make_sac_agent(cfg, env, Devices.of(cfg))
     finally:
         env.close()
     losses, parameters = [], []
@@ -281,7 +282,7 @@ def test_recipe_runs_on_cuda_compiled_with_cudagraphs(tmp_path):
                  "logger.backend=csv")
     cfg = config(tmp_path, *overrides)
     env = factories.make_environment(cfg, None, None)
-    actor, critics = factories.make_sac_agent(cfg, env)
+    actor, critics = factories.make_sac_agent(cfg, env, Devices.of(cfg))
     env.close()
     loss, optimizer = factories.make_sac_loss(cfg, actor, critics, 4)
     assert type(factories.make_sac_update(cfg, loss, optimizer)).__name__ == "CudaGraphModule"

@@ -7,6 +7,7 @@ from tensordict import TensorDict
 from temporal_torchrl.envs import (
     EVALUATION_TASKS,
     collect_expert_episodes,
+    collect_successful_experts,
     first_success_index,
     make_env,
 )
@@ -77,6 +78,24 @@ def test_whole_episodes_are_kept_when_asked():
                                        max_episode_steps=120)
     assert len(episode) == 120 and first_success_index(episode) < 100
     assert episode["next", "truncated"][-1].item() and not episode["next", "done"][:-1].any()
+
+
+def test_successful_experts_are_the_first_round_when_it_succeeds():
+    """The first round draws the noise of ``collect_expert_episodes`` itself (generator seeded
+    by the layout's seed), so the preloaded positives and the benchmark's experts are those
+    episodes."""
+    experts = collect_successful_experts("reach", 0, 2)
+    plain = collect_expert_episodes("reach", 0, num_episodes=2)
+    assert all(torch.equal(a["action"], b["action"]) for a, b in zip(experts, plain, strict=True))
+    assert collect_successful_experts("reach", 0, 0) == []
+
+
+def test_successful_experts_give_up_after_max_attempts_episodes_per_episode_wanted():
+    """Failed episodes are replaced in further rounds until ``max_attempts`` episodes per episode
+    wanted were tried; then an error says how many succeeded."""
+    with pytest.raises(RuntimeError, match=r"door-open \(noise 0.1\) succeeded in only 0 of 4 "
+                                           r"episodes, 2 wanted"):
+        collect_successful_experts("door-open", 0, 2, max_episode_steps=4, max_attempts=2)
 
 
 def test_first_success_index():

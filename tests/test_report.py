@@ -619,6 +619,7 @@ def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
     """report.py --figure-run on runs whose reward has settings beyond the names (a certainty-
     scaled D3, a d_sequence with a 4-state window): the curves are the trained reward's own
     forward on the stored episode, the reward built by the recipe's factory."""
+    from temporal_torchrl.configs.rules import Devices
     from temporal_torchrl.encoders import load_encoder
     from temporal_torchrl.reports import reward_curves
     from temporal_torchrl.training import factories
@@ -628,7 +629,7 @@ def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
                  *overrides)
     sac_temporal.train(cfg)
     expert, failed = reward_curves(run_dir)
-    trained = factories.make_reward(cfg, load_encoder("state", dim=16))
+    trained = factories.make_reward(cfg, load_encoder("state", dim=16), Devices.of(cfg))
     trained.load_state_dict(torch.load(run_dir / "checkpoint.pt", weights_only=True)["reward"])
     stored = torch.load(run_dir / "replay" / "000000.pt", weights_only=True)
     embeddings = stored["embedding"].float()

@@ -31,6 +31,7 @@ from omegaconf import OmegaConf
 from torchrl.modules import MLP, ValueOperator
 
 import temporal_torchrl.runs.durable as durable
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.runs import (
     RunConflictError,
     RunDirectory,
@@ -309,8 +310,9 @@ def test_a_checkpoint_of_torchrls_sac_loss_is_refused_with_the_way_out(tmp_path)
     sac_temporal.train(config(tmp_path, "train.episodes=2", "train.stop_after_episodes=1"))
     run = RunDirectory(tmp_path / "run")
     checkpoint = run.load_checkpoint()
-    env = factories.make_environment(config(tmp_path), None, None)
-    actor, _ = factories.make_sac_agent(config(tmp_path), env)
+    cfg = config(tmp_path)
+    env = factories.make_environment(cfg, None, None)
+    actor, _ = factories.make_sac_agent(cfg, env, Devices.of(cfg))
     env.close()
     qvalue = ValueOperator(MLP(in_features=43, num_cells=[256, 256], out_features=1),
                            in_keys=["action", "observation"])
@@ -431,7 +433,8 @@ def test_extended_run_grows_the_buffer_and_keeps_the_experts(tmp_path, capsys):
                    f"replay_buffer.capacity={expert_rows + 2 * 21}")
     sac_temporal.train(small)
     state = RunDirectory(run_dir).load_checkpoint()
-    buffer = factories.make_replay_buffer(small, state.buffer_capacity, reward=None)
+    buffer = factories.make_replay_buffer(small, state.buffer_capacity, reward=None,
+                                          devices=Devices.of(small))
     for rows in RunDirectory(run_dir).replay_episodes(state.inserted):
         buffer.extend(rows)
     stored = set().union(*(buffer.sample()["episode"].tolist() for _ in range(60)))

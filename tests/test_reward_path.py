@@ -8,6 +8,7 @@ import torch.nn.functional as F
 from helpers import config
 from tensordict import TensorDict
 
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows, transition_index
 from temporal_torchrl.objectives import PositionalRankingLoss, StackedCriticSACLoss
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, register_reward, unregister_reward
@@ -38,12 +39,13 @@ def test_rendered_rollout_relabelled_from_the_buffer_gives_the_env_rewards(tmp_p
                  "env.image_size=32", "env.max_episode_steps=12", "reward.k=3",
                  "replay_buffer.embedding_dtype=float32")
     torch.manual_seed(0)
-    encoder = factories.make_encoder(cfg)
-    reward = factories.make_reward(cfg, encoder)
+    devices = Devices.of(cfg)
+    encoder = factories.make_encoder(cfg, devices.encoder)
+    reward = factories.make_reward(cfg, encoder, devices)
     env = factories.make_environment(cfg, encoder, reward)
     rollout = env.rollout(12, break_when_any_done=False)
     env.close()
-    buffer = factories.make_replay_buffer(cfg, capacity=100, reward=reward)
+    buffer = factories.make_replay_buffer(cfg, capacity=100, reward=reward, devices=devices)
     buffer.extend(episode_rows(rollout, embedding_dtype=torch.float32))
     rows = torch.arange(12)  # the episode's transitions, in order (steps = rows)
     batch = buffer[transition_index(rows, rows, cfg.reward.k)]  # relabelled by its transform

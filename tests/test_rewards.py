@@ -318,6 +318,7 @@ def test_alpha_from_the_config_reaches_p3_p4_and_d5(tmp_path, positional):
     default's)."""
     from helpers import config
 
+    from temporal_torchrl.configs.rules import Devices
     from temporal_torchrl.training import factories
 
     gen = torch.Generator().manual_seed(4)
@@ -328,7 +329,8 @@ def test_alpha_from_the_config_reaches_p3_p4_and_d5(tmp_path, positional):
         cfg = config(tmp_path, f"reward.positional={positional}", "reward.directional=d5",
                      f"reward.alpha={alpha}", "reward.rho=0.5", "reward.lambda_=2.0")
         torch.manual_seed(0)  # the same heads at both alphas
-        reward = factories.make_reward(cfg, factories.make_encoder(cfg))
+        devices = Devices.of(cfg)
+        reward = factories.make_reward(cfg, factories.make_encoder(cfg, devices.encoder), devices)
         with torch.no_grad():
             out = reward(s, s0, s_prev, success)
         g, b = (x.double().numpy() for x in (reward.goal_embedding, reward.baseline_embedding))

@@ -6,6 +6,7 @@ from helpers import config
 from torch import nn
 from torchrl.modules import MLP, ValueOperator
 
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.objectives import StackedQValueNetwork
 from temporal_torchrl.training import factories
 
@@ -21,9 +22,9 @@ def test_sac_update_matches_torchrls_sac_loss(tmp_path):
     env = factories.make_environment(cfg, None, None)
     batches = [env.rollout(16, break_when_any_done=False) for _ in range(3)]
     torch.manual_seed(0)
-    actor, critics = factories.make_sac_agent(cfg, env)
+    actor, critics = factories.make_sac_agent(cfg, env, Devices.of(cfg))
     torch.manual_seed(0)
-    reference_actor, _ = factories.make_sac_agent(cfg, env)
+    reference_actor, _ = factories.make_sac_agent(cfg, env, Devices.of(cfg))
     qvalue = ValueOperator(MLP(in_features=43, num_cells=list(cfg.sac.hidden_sizes),
                                out_features=1, activation_class=nn.ReLU),
                            in_keys=["action", "observation"])

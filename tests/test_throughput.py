@@ -9,6 +9,7 @@ from helpers import config
 from helpers import episode_csv_rows as episode_rows
 from torch._dynamo.utils import counters
 
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.encoders import load_encoder
 from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
 from temporal_torchrl.runs import RunDirectory
@@ -141,7 +142,7 @@ def test_compiled_sac_update_matches_the_eager_one(tmp_path):
     for compiled in (False, True):
         cfg = config(tmp_path, "reward.directional=d3", f"compile.enabled={compiled}")
         torch.manual_seed(0)
-        actor, critics = factories.make_sac_agent(cfg, env)
+        actor, critics = factories.make_sac_agent(cfg, env, Devices.of(cfg))
         loss, optimizer = factories.make_sac_loss(cfg, actor, critics, 4)
         update = factories.make_sac_update(cfg, loss, optimizer)
         torch.manual_seed(1)

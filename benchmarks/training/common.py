@@ -22,6 +22,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 from tensordict import TensorDict
 
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.data import episode_rows
 from temporal_torchrl.training import factories
 from training import RECIPES
@@ -130,14 +131,15 @@ def training_setup(tmp: Path, budget: Budget, dim: int, *overrides: str,
     cfg = recipe_config(tmp / f"setup_{next(RUN_IDS)}", budget, "encoder.name=state",
                         f"+encoder.options.dim={dim}", *overrides)
     torch.manual_seed(0)
-    reward = factories.make_reward(cfg, factories.make_encoder(cfg))
+    devices = Devices.of(cfg)
+    reward = factories.make_reward(cfg, factories.make_encoder(cfg, devices.encoder), devices)
     env = factories.make_environment(cfg, None, None)
-    actor, critics = factories.make_sac_agent(cfg, env)
+    actor, critics = factories.make_sac_agent(cfg, env, devices)
     env.close()
     loss, optimizer = factories.make_sac_loss(cfg, actor, critics, ACTION_DIM)
     length = budget.buffer_episode_length
     buffer = factories.make_replay_buffer(cfg, 2 * budget.buffer_episodes * (length + 1),
-                                          reward)
+                                          reward, devices)
     buffer.extend(episode_rows(synthetic_episode(
         length, dim, success_from=3 * length // 5 if stage == 2 else None)))
     for _ in range(budget.buffer_episodes - 1):

@@ -15,6 +15,7 @@ from omegaconf import DictConfig
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.envs import make_env
 from temporal_torchrl.training import factories
 from training.common import Budget, recipe_config
@@ -24,7 +25,7 @@ from training.sac_update import torchrl_sac_update
 def plain_sac_steps_per_second(cfg: DictConfig, episodes: int) -> float:
     """The reference: TorchRL env.step + per-step buffer extend + SACLoss update, no VLM."""
     env = make_env(cfg.env.task, cfg.env.seed, max_episode_steps=cfg.env.max_episode_steps)
-    actor, _ = factories.make_sac_agent(cfg, env)
+    actor, _ = factories.make_sac_agent(cfg, env, Devices.of(cfg))
     update = torchrl_sac_update(cfg, actor)
     buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(episodes * 1000),
                                     batch_size=cfg.sac.batch_size)

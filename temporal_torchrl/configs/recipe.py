@@ -6,8 +6,8 @@ Hydra's own settings; the presets and protocols (``recipes/preset``, ``recipes/p
 only what they change. Hydra refuses a value of the wrong type as it composes, naming the key;
 the ranges declared here with :func:`~temporal_torchrl.configs.fields.constrained` and the rules
 that relate keys or need code (:mod:`temporal_torchrl.configs.rules`) are checked before a run
-does any work. The library's own defaults (the reward's, relay's, the evaluation's) are read from
-:mod:`temporal_torchrl.defaults`. ``python recipes/sac_temporal.py --cfg job`` prints the
+does any work. The library's own defaults (the env's, the reward's, relay's, the evaluation's) are
+read from :mod:`temporal_torchrl.defaults`. ``python recipes/sac_temporal.py --cfg job`` prints the
 composed config.
 
 The default run is the whole pipeline offline on a CPU (time and output: README.md): rendering
@@ -45,13 +45,13 @@ class SharedEnvConfig:
     #: The layout (fixed goal) and every random generator of the run.
     seed: int = constrained(0, ge=0)
     #: Steps per episode (Metaworld's truncation).
-    max_episode_steps: int = constrained(500, ge=1)
+    max_episode_steps: int = constrained(defaults.MAX_EPISODE_STEPS, ge=1)
     #: Side of the rendered frames (square); only encoders that read pixels use them.
-    image_size: int = constrained(64, ge=1)
+    image_size: int = constrained(defaults.IMAGE_SIZE, ge=1)
     #: The Metaworld camera rendered.
-    camera: str = "corner2"
+    camera: str = defaults.CAMERA
     #: Shadows, reflections and MSAA off (about 8x faster on a CPU); false: Metaworld's look.
-    fast_render: bool = True
+    fast_render: bool = defaults.FAST_RENDER
 
 
 @dataclass

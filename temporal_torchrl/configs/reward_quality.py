@@ -6,7 +6,9 @@ training recipe's (:mod:`temporal_torchrl.configs.recipe`, with its defaults and
 for the keys that take several values here: ``env.task`` a task name or a list of them (one
 table per task and a summary), ``reward.positional`` and ``reward.directional`` a variant or a
 list of variants, every one listed scored (each checked by
-:mod:`temporal_torchrl.configs.rules`).
+:mod:`temporal_torchrl.configs.rules`). ``dataset.*``'s defaults are
+:class:`~temporal_torchrl.reward_quality.DatasetSpec`'s, both read from
+:mod:`temporal_torchrl.defaults`.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from temporal_torchrl import defaults
 from temporal_torchrl.configs.fields import constrained
 from temporal_torchrl.configs.recipe import EncoderConfig, SharedEnvConfig, SharedRewardConfig
 
@@ -52,19 +55,21 @@ class DatasetConfig:
     """``dataset.*``: the scored episodes (at least 2 failed episodes of one kind: the rules)."""
 
     #: Successful scripted-expert episodes (the positives).
-    expert_episodes: int = constrained(16, ge=2)
+    expert_episodes: int = constrained(defaults.DATASET_EXPERT_EPISODES, ge=2)
     #: Failed episodes of uniform random actions.
-    random_episodes: int = constrained(6, ge=0)
+    random_episodes: int = constrained(defaults.DATASET_RANDOM_EPISODES, ge=0)
     #: Failed episodes of the expert with a large action noise.
-    failed_expert_episodes: int = constrained(6, ge=0)
+    failed_expert_episodes: int = constrained(defaults.DATASET_FAILED_EXPERT_EPISODES,
+                                              ge=0)
     #: The successful experts' action noise (the stage-2 preloaded positives').
-    expert_noise: float = constrained(0.1, ge=0)
+    expert_noise: float = constrained(defaults.EXPERT_NOISE, ge=0)
     #: As ``train.expert_steps_after_success``.
-    expert_steps_after_success: int | None = constrained(5, ge=0)
+    expert_steps_after_success: int | None = constrained(defaults.EXPERT_STEPS_AFTER_SUCCESS,
+                                                         ge=0)
     #: The failed experts' noise; doubled while most of their episodes still succeed.
-    failure_noise: float = constrained(2.0, gt=0)
+    failure_noise: float = constrained(defaults.DATASET_FAILURE_NOISE, gt=0)
     #: Episodes tried per episode wanted, for each kind, before giving up.
-    max_attempts: int = constrained(10, ge=1)
+    max_attempts: int = constrained(defaults.DATASET_MAX_ATTEMPTS, ge=1)
     #: Of each kind's episodes, the fraction held out for scoring.
     held_out_fraction: float = constrained(0.33, gt=0, lt=1)
     #: Where collected episodes are cached; null: collect every time.

@@ -193,11 +193,43 @@ def resolve_device(name: str, train_device: str | None = None) -> torch.device:
     return device
 
 
-def _check_device(cfg: DictConfig, key: str, train_device: str | None = None) -> None:
+def _device(cfg: DictConfig, key: str, train_device: str | None = None) -> torch.device:
+    """``key``'s device, resolved; a ``ValueError`` naming the key when torch cannot use it."""
     try:
-        resolve_device(OmegaConf.select(cfg, key), train_device=train_device)
+        return resolve_device(OmegaConf.select(cfg, key), train_device=train_device)
     except ValueError as error:
         raise _invalid(key, OmegaConf.select(cfg, key), str(error)) from error
+
+
+@dataclasses.dataclass(frozen=True)
+class Devices:
+    """The torch devices of a training run's parts, resolved from its config's names (``auto``,
+    ``cpu``, ``cuda:0`` ...) by one rule (:func:`resolve_device`; ``auto`` for the encoder and
+    the replay: the train device's).
+
+    The recipe's build resolves them once and hands them to every factory
+    (:mod:`temporal_torchrl.training.factories`), so no two parts can disagree on where ``auto``
+    is. The config keeps the names as given: config.json, the run directory and the resume
+    checks do not depend on the machine a run starts on.
+
+    Attributes:
+        train: ``train.device``: the SAC agent, the reward and its heads, the policy, the SAC
+            and finetuning batches, the evaluation's observations.
+        encoder: ``encoder.device``: the frozen encoder.
+        replay: ``replay_buffer.device``: the replay buffer's storage.
+    """
+
+    train: torch.device
+    encoder: torch.device
+    replay: torch.device
+
+    @classmethod
+    def of(cls, cfg: DictConfig) -> Devices:
+        """The devices of a training config; a ``ValueError`` naming the key of a device torch
+        cannot use (:func:`validate_recipe_config` checks them so)."""
+        return cls(train=_device(cfg, "train.device"),
+                   encoder=_device(cfg, "encoder.device", cfg.train.device),
+                   replay=_device(cfg, "replay_buffer.device", cfg.train.device))
 
 
 def _check_tasks(tasks: Sequence[Any], given: Any, expected: str) -> None:
@@ -277,9 +309,8 @@ def validate_recipe_config(cfg: DictConfig, source: str | None = None) -> DictCo
         raise _invalid("replay_buffer.capacity", capacity,
                        f"null (the whole run) or an integer >= {longest}, the rows of the longest "
                        "episode (its steps + 1), plus the rows of any preloaded experts")
-    for key in ("train.device", "encoder.device", "replay_buffer.device"):
-        _check_device(cfg, key, train_device=cfg.train.device)
-    if cfg.compile.cudagraphs and resolve_device(cfg.train.device).type != "cuda":
+    devices = Devices.of(cfg)  # a device torch cannot use: an error naming its key
+    if cfg.compile.cudagraphs and devices.train.type != "cuda":
         raise _invalid("compile.cudagraphs", True, "false: CUDA graphs need a CUDA train.device")
     _check_baseline(cfg.env.task, cfg.reward.baseline)
     if cfg.train.positives_from == "":
@@ -339,5 +370,5 @@ def validate_reward_quality_config(cfg: DictConfig) -> DictConfig:
                        "and the held-out part)")
     for task in tasks:
         _check_baseline(task, cfg.reward.baseline)
-    _check_device(cfg, "encoder.device")
+    _device(cfg, "encoder.device")
     return cfg

@@ -2,7 +2,6 @@
 canonical temporal env composition."""
 
 from temporal_torchrl.envs.experts import (
-    EXPERT_MAX_STEPS,
     collect_expert_episodes,
     collect_successful_experts,
     first_success_index,
@@ -20,7 +19,6 @@ from temporal_torchrl.envs.temporal import make_temporal_env
 
 __all__ = [
     "EVALUATION_TASKS",
-    "EXPERT_MAX_STEPS",
     "GENERIC_BASELINE",
     "TASKS",
     "MetaworldEnv",

@@ -15,17 +15,22 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import step_mdp
 
+from temporal_torchrl import defaults
 from temporal_torchrl.envs.metaworld_env import make_env
 from temporal_torchrl.envs.tasks import TaskSpec, get_task
 
 _GOAL_SLICE = slice(36, 39)
+#: A retry round's noise generator is seeded with seed + this * round (round 0: ``seed``).
+_RETRY_SEED = 1_000
 
 
 def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: int = 1,
-                            noise: float = 0.1, render: bool = False, image_size: int = 224,
-                            camera: str = "corner2", fast_render: bool = True,
-                            steps_after_success: int | None = 5, max_episode_steps: int = 500,
-                            generator_seed: int | None = None, goal: str = "fixed",
+                            noise: float = defaults.EXPERT_NOISE, render: bool = False,
+                            image_size: int = 224, camera: str = defaults.CAMERA,
+                            fast_render: bool = defaults.FAST_RENDER,
+                            steps_after_success: int | None = defaults.EXPERT_STEPS_AFTER_SUCCESS,
+                            max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
+                            generator_seed: int | None = None, goal: str = defaults.GOAL,
                             stream_index: int = 0) -> list[TensorDict]:
     """Run Metaworld's scripted policy on the task (fixed goal and goal-hidden by default).
 
@@ -133,34 +138,41 @@ def first_success_index(episode: TensorDict) -> int:
     return int(success.nonzero()[0, 0])
 
 
-#: Steps a scripted expert is given to succeed (the protocol's episode length).
-EXPERT_MAX_STEPS = 500
-
-
-def collect_successful_experts(task: str, seed: int, count: int, *, render: bool = False,
-                               image_size: int = 224, camera: str = "corner2",
-                               fast_render: bool = True,
-                               max_episode_steps: int = EXPERT_MAX_STEPS,
-                               steps_after_success: int | None = 5,
-                               max_attempts: int = 5, goal: str = "fixed") -> list[TensorDict]:
+def collect_successful_experts(
+        task: str, seed: int, count: int, *, noise: float = defaults.EXPERT_NOISE,
+        render: bool = False, image_size: int = 224, camera: str = defaults.CAMERA,
+        fast_render: bool = defaults.FAST_RENDER,
+        max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
+        steps_after_success: int | None = defaults.EXPERT_STEPS_AFTER_SUCCESS,
+        max_attempts: int = 5, goal: str = defaults.GOAL) -> list[TensorDict]:
     """``count`` successful scripted-expert episodes of the task's layout ``seed`` (random
-    goals: of layouts from the seed's experts stream).
+    goals: of layouts from the seed's experts stream), the stage-2 preloaded positives and the
+    reward-quality benchmark's alike.
 
     Episodes are cut ``steps_after_success`` steps after their first success (None: whole
-    episodes). Noisy episodes that fail are replaced (new noise seeds and, for random goals, new
-    layouts), up to ``max_attempts`` rounds; frames are rendered when ``render`` (pass the
-    training run's render settings), nothing is embedded here.
+    episodes). A noisy episode that fails is replaced in the next round, with a new noise seed
+    and, for random goals, new layouts; up to ``max_attempts`` episodes are tried per episode
+    wanted. Frames are rendered when ``render`` (pass the training run's render settings),
+    nothing is embedded here.
+
+    Raises:
+        RuntimeError: when fewer than ``count`` of the episodes tried succeed.
     """
     episodes: list[TensorDict] = []
-    for attempt in range(max_attempts):
+    tried = attempt = 0
+    while len(episodes) < count:
+        if tried >= max_attempts * count:
+            raise RuntimeError(
+                f"the scripted expert of {task} (noise {noise}) succeeded in only "
+                f"{len(episodes)} of {tried} episodes, {count} wanted: lower the noise or raise "
+                "max_attempts.")
+        missing = count - len(episodes)
         batch = collect_expert_episodes(
-            task, seed, num_episodes=count - len(episodes), render=render,
-            image_size=image_size, camera=camera, fast_render=fast_render,
-            max_episode_steps=max_episode_steps, steps_after_success=steps_after_success,
-            generator_seed=None if attempt == 0 else seed + 1000 * attempt, goal=goal,
+            task, seed, num_episodes=missing, noise=noise, render=render, image_size=image_size,
+            camera=camera, fast_render=fast_render, max_episode_steps=max_episode_steps,
+            steps_after_success=steps_after_success,
+            generator_seed=None if attempt == 0 else seed + _RETRY_SEED * attempt, goal=goal,
             stream_index=attempt)
         episodes += [episode for episode in batch if bool(episode["next", "success"].any())]
-        if len(episodes) == count:
-            return episodes
-    raise RuntimeError(f"the scripted expert of {task} succeeded in only {len(episodes)} of the "
-                       f"{count} episodes asked for in {max_attempts} rounds.")
+        tried, attempt = tried + missing, attempt + 1
+    return episodes

@@ -43,7 +43,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase, TransformedEnv
 
-from temporal_torchrl.defaults import GOALS
+from temporal_torchrl import defaults
 from temporal_torchrl.envs.tasks import TaskSpec, get_task
 
 _OBSERVATION_DIM = 39
@@ -94,12 +94,13 @@ class MetaworldEnv(EnvBase):
         torch.Size([10, 1])
     """
 
-    def __init__(self, task: str | TaskSpec, seed: int = 0, *, goal: str = "fixed",
+    def __init__(self, task: str | TaskSpec, seed: int = 0, *, goal: str = defaults.GOAL,
                  stream: str = "training", stream_index: int = 0,
-                 goal_observable: bool | None = None, max_episode_steps: int = 500,
+                 goal_observable: bool | None = None,
+                 max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
                  device: str | torch.device = "cpu") -> None:
         spec = get_task(task)
-        if goal not in GOALS:
+        if goal not in defaults.GOALS:
             raise ValueError(
                 f"goal={goal!r} is not a goal setting: expected 'fixed' (one layout per run, the "
                 "thesis's protocol) or 'random' (a new layout at every reset)."
@@ -239,9 +240,10 @@ class MetaworldEnv(EnvBase):
 
 
 def make_env(task: str | TaskSpec, seed: int = 0, *, render: bool = False, image_size: int = 224,
-             camera: str = "corner2", fast_render: bool = True, goal: str = "fixed",
-             stream: str = "training", stream_index: int = 0,
-             goal_observable: bool | None = None, max_episode_steps: int = 500,
+             camera: str = defaults.CAMERA, fast_render: bool = defaults.FAST_RENDER,
+             goal: str = defaults.GOAL, stream: str = "training", stream_index: int = 0,
+             goal_observable: bool | None = None,
+             max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
              device: str | torch.device = "cpu") -> EnvBase:
     """A Metaworld task as a TorchRL env, optionally rendering ``"pixels"``.
 

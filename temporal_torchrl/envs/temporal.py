@@ -15,6 +15,7 @@ from typing import Any
 import torch
 from torchrl.envs import EnvBase, ParallelEnv, TransformedEnv
 
+from temporal_torchrl import defaults
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.metaworld_env import make_env
 from temporal_torchrl.rewards import TemporalReward
@@ -28,9 +29,10 @@ from temporal_torchrl.transforms import (
 
 def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = None,
                       reward: TemporalReward | None = None, history: int | None = None,
-                      image_size: int = 224, camera: str = "corner2", fast_render: bool = True,
-                      max_episode_steps: int = 500, num_envs: int = 1,
-                      goal: str = "fixed") -> EnvBase:
+                      image_size: int = 224, camera: str = defaults.CAMERA,
+                      fast_render: bool = defaults.FAST_RENDER,
+                      max_episode_steps: int = defaults.MAX_EPISODE_STEPS, num_envs: int = 1,
+                      goal: str = defaults.GOAL) -> EnvBase:
     """``task``'s env -> (render) -> embedding -> history -> temporal reward.
 
     Frames are rendered only when ``encoder`` reads pixels; without an encoder the plain task

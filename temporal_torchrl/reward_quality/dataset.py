@@ -36,9 +36,15 @@ from typing import Any
 import torch
 from tensordict import TensorDict
 
+from temporal_torchrl import defaults
 from temporal_torchrl.data import embed_episode
 from temporal_torchrl.encoders import Encoder
-from temporal_torchrl.envs import TASKS, collect_expert_episodes, make_env
+from temporal_torchrl.envs import (
+    TASKS,
+    collect_expert_episodes,
+    collect_successful_experts,
+    make_env,
+)
 
 #: Episode kinds, positives first.
 EPISODE_KINDS = ("expert", "random", "failed_expert")
@@ -48,8 +54,9 @@ EPISODE_KEYS = ("observation", "embedding", "action", "success", ("next", "obser
                 ("next", "truncated"), ("next", "done"))
 #: Version of the cache file layout; files of another version are collected again.
 CACHE_FORMAT = 2
-# Offsets of the noise generators' seeds, so the three kinds never share a noise stream.
-_EXPERT_RETRY_SEED = 1_000
+#: Offset of the failed experts' noise seeds, far from the successful experts' retry seeds
+#: (:func:`~temporal_torchrl.envs.collect_successful_experts`), so the kinds never share a noise
+#: stream.
 _FAILURE_SEED = 100_000
 
 
@@ -76,17 +83,17 @@ class DatasetSpec:
 
     task: str
     seed: int = 0
-    image_size: int = 64
-    camera: str = "corner2"
-    fast_render: bool = True
-    max_episode_steps: int = 500
-    expert_episodes: int = 16
-    random_episodes: int = 6
-    failed_expert_episodes: int = 6
-    expert_noise: float = 0.1
-    expert_steps_after_success: int | None = 5
-    failure_noise: float = 2.0
-    max_attempts: int = 10
+    image_size: int = defaults.IMAGE_SIZE
+    camera: str = defaults.CAMERA
+    fast_render: bool = defaults.FAST_RENDER
+    max_episode_steps: int = defaults.MAX_EPISODE_STEPS
+    expert_episodes: int = defaults.DATASET_EXPERT_EPISODES
+    random_episodes: int = defaults.DATASET_RANDOM_EPISODES
+    failed_expert_episodes: int = defaults.DATASET_FAILED_EXPERT_EPISODES
+    expert_noise: float = defaults.EXPERT_NOISE
+    expert_steps_after_success: int | None = defaults.EXPERT_STEPS_AFTER_SUCCESS
+    failure_noise: float = defaults.DATASET_FAILURE_NOISE
+    max_attempts: int = defaults.DATASET_MAX_ATTEMPTS
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -204,23 +211,17 @@ def _embedded(episodes: list[TensorDict], encoder: Encoder) -> list[TensorDict]:
 
 
 def _collect_experts(spec: DatasetSpec, encoder: Encoder, render: bool) -> list[TensorDict]:
-    episodes: list[TensorDict] = []
-    tried, attempt = 0, 0
-    while tried < spec.max_attempts * spec.expert_episodes:
-        missing = spec.expert_episodes - len(episodes)
-        batch = collect_expert_episodes(
-            spec.task, spec.seed, num_episodes=missing, noise=spec.expert_noise, render=render,
+    try:
+        experts = collect_successful_experts(
+            spec.task, spec.seed, spec.expert_episodes, noise=spec.expert_noise, render=render,
             image_size=spec.image_size, camera=spec.camera, fast_render=spec.fast_render,
             steps_after_success=spec.expert_steps_after_success,
-            max_episode_steps=max(spec.max_episode_steps, 500),
-            generator_seed=None if attempt == 0 else spec.seed + _EXPERT_RETRY_SEED * attempt)
-        episodes += _embedded([e for e in batch if bool(e["next", "success"].any())], encoder)
-        if len(episodes) == spec.expert_episodes:
-            return episodes
-        tried, attempt = tried + missing, attempt + 1
-    raise RuntimeError(f"the scripted expert of {spec.task} (noise {spec.expert_noise}) succeeded "
-                       f"in only {len(episodes)} of {tried} episodes, {spec.expert_episodes} "
-                       "wanted; lower dataset.expert_noise or raise dataset.max_attempts.")
+            max_episode_steps=max(spec.max_episode_steps, defaults.MAX_EPISODE_STEPS),
+            max_attempts=spec.max_attempts)
+    except RuntimeError as error:
+        raise RuntimeError(f"{error} In this benchmark's config: dataset.expert_noise and "
+                           "dataset.max_attempts.") from error
+    return _embedded(experts, encoder)
 
 
 def _collect_random(spec: DatasetSpec, encoder: Encoder, render: bool) -> list[TensorDict]:

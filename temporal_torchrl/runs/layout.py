@@ -8,6 +8,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from temporal_torchrl import defaults
+
 CONFIG_FILE = "config.json"
 EPISODES_FILE = "episodes.csv"
 #: Evaluations of the deterministic policy (``eval.every``).
@@ -44,11 +46,12 @@ def episode_file(index: int) -> str:
 
 
 #: Preloaded positive episodes of each protocol of the thesis (section 5.1).
-PROTOCOLS = {0: "stage1", 50: "stage2"}
+PROTOCOLS = {0: "stage1", defaults.STAGE2_POSITIVES: "stage2"}
 
 
 def protocol_name(preload_positives: int) -> str:
-    """``stage1`` (no preloaded episodes), ``stage2`` (50), else ``preload<N>``."""
+    """``stage1`` (no preloaded episodes), ``stage2``
+    (:data:`~temporal_torchrl.defaults.STAGE2_POSITIVES`), else ``preload<N>``."""
     return PROTOCOLS.get(preload_positives, f"preload{preload_positives}")
 
 

@@ -10,6 +10,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from temporal_torchrl import defaults
 from temporal_torchrl.rewards.config import uses_vlm_reward
 from temporal_torchrl.runs.layout import protocol_name
 
@@ -39,7 +40,7 @@ def default_run_dir(cfg: DictConfig) -> Path:
     else:
         method = "sac"
     protocol = protocol_name(cfg.train.preload_positives)
-    if cfg.env.get("goal", "fixed") == "random":
+    if cfg.env.get("goal", defaults.FIXED_GOAL) == "random":
         protocol += "_randomgoal"
     root = Path(cfg.runs_dir) if cfg.runs_dir is not None else Path("runs")
     return root / cfg.env.task / f"{method}_{protocol}" / f"seed{cfg.env.seed}"

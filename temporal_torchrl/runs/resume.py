@@ -13,6 +13,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from temporal_torchrl import defaults
 from temporal_torchrl.rewards.config import uses_vlm_reward
 from temporal_torchrl.runs.directory import RunDirectory
 from temporal_torchrl.runs.layout import CONFIG_FILE, SUMMARY_FILE, flatten
@@ -171,7 +172,7 @@ def resumed_config(cfg: DictConfig, run_dir: Path,
 #: frames and the encoder when the receiving run embeds them.
 _LAYOUT_KEYS = ("env.task", "env.seed", "env.goal")
 #: What a key a source run's config.json lacks meant then (runs from before the key existed).
-_BEFORE_THE_KEY = {"env.goal": "fixed"}
+_BEFORE_THE_KEY = {"env.goal": defaults.FIXED_GOAL}
 _FRAME_KEYS = ("env.image_size", "env.camera", "env.fast_render", "encoder.name",
                "encoder.checkpoint", "encoder.options")
 

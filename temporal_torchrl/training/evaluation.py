@@ -12,6 +12,7 @@ import torch
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from temporal_torchrl import defaults
 from temporal_torchrl.envs.metaworld_env import MetaworldEnv
 
 
@@ -44,8 +45,10 @@ class PolicyEvaluation:
         (2, 0.0, 20.0)
     """
 
-    def __init__(self, task: str, seed: int, *, goal: str = "fixed", episodes: int = 10,
-                 max_episode_steps: int = 500, device: str | torch.device = "cpu") -> None:
+    def __init__(self, task: str, seed: int, *, goal: str = defaults.GOAL,
+                 episodes: int = defaults.EVAL_EPISODES,
+                 max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
+                 device: str | torch.device = "cpu") -> None:
         if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
             raise ValueError(f"episodes={episodes!r}; expected a positive integer, the "
                              "evaluation episodes per evaluation (e.g. 10).")

@@ -1,5 +1,6 @@
 """The ``make_*`` factories of ``recipes/sac_temporal.py`` (as in TorchRL's sota recipes), from
-its config.
+its config and its :class:`~temporal_torchrl.configs.rules.Devices`, resolved once by the
+recipe's build: every part is placed where the others expect it.
 
 They live in the package, not beside the script, so a job that unpickles the recipe elsewhere
 (a submitit job on a Slurm node) imports them as any other module.
@@ -22,7 +23,8 @@ from torchrl.envs.utils import ExplorationType
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from torchrl.record.loggers import CSVLogger, Logger, WandbLogger
 
-from temporal_torchrl.configs.rules import resolve_device
+from temporal_torchrl import defaults
+from temporal_torchrl.configs.rules import Devices
 from temporal_torchrl.data import (
     EpisodeReplayBuffer,
     embed_episode,
@@ -31,11 +33,7 @@ from temporal_torchrl.data import (
     goal_image_from_rows,
 )
 from temporal_torchrl.encoders import Encoder, load_encoder
-from temporal_torchrl.envs import (
-    EXPERT_MAX_STEPS,
-    collect_successful_experts,
-    make_temporal_env,
-)
+from temporal_torchrl.envs import collect_successful_experts, make_temporal_env
 from temporal_torchrl.envs.task_reward import task_text_embeddings
 from temporal_torchrl.modules import ReLU
 from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
@@ -56,11 +54,12 @@ from temporal_torchrl.training.trainer import RewardHeadTrainer
 RELAY_SEED_OFFSET = 10_007
 
 
-def make_encoder(cfg: DictConfig) -> Encoder:
+def make_encoder(cfg: DictConfig, device: torch.device) -> Encoder:
+    """``encoder.*``'s encoder on ``device`` (a training run's ``Devices.encoder``; both recipes
+    build their encoder here, and the reward-quality one has no ``train.device``)."""
     options = OmegaConf.to_container(cfg.encoder.options, resolve=True) or {}
-    train_device = OmegaConf.select(cfg, "train.device")  # absent in evaluate_rewards.yaml
-    return load_encoder(cfg.encoder.name, checkpoint=cfg.encoder.checkpoint,
-                        device=resolve_device(cfg.encoder.device, train_device), **options)
+    return load_encoder(cfg.encoder.name, checkpoint=cfg.encoder.checkpoint, device=device,
+                        **options)
 
 
 def describe_encoder(cfg: DictConfig, encoder: Encoder | None) -> str:
@@ -76,14 +75,14 @@ def describe_encoder(cfg: DictConfig, encoder: Encoder | None) -> str:
     return f"encoder: {encoder.name}, {encoder.dim}-d, weights: {weights}"
 
 
-def make_reward(cfg: DictConfig, encoder: Encoder) -> TemporalReward:
-    """The run's reward on ``train.device``, goal and baseline texts embedded by the encoder's
+def make_reward(cfg: DictConfig, encoder: Encoder, devices: Devices) -> TemporalReward:
+    """The run's reward on the train device, goal and baseline texts embedded by the encoder's
     text side."""
     reward = reward_from_config(
         cfg, *task_text_embeddings(cfg.env.task, encoder, cfg.reward.baseline))
     if cfg.compile.enabled:  # the relabelling (and the env's reward) runs compiled
         reward.compile(mode=cfg.compile.mode)
-    return reward.to(resolve_device(cfg.train.device))
+    return reward.to(devices.train)
 
 
 def make_environment(cfg: DictConfig, encoder: Encoder | None,
@@ -104,7 +103,7 @@ def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
         cfg.env.task, cfg.env.seed, count,
         render=encoder is not None and encoder.input_key == "pixels",
         image_size=cfg.env.image_size, camera=cfg.env.camera, fast_render=cfg.env.fast_render,
-        max_episode_steps=max(cfg.env.max_episode_steps, EXPERT_MAX_STEPS),
+        max_episode_steps=max(cfg.env.max_episode_steps, defaults.MAX_EPISODE_STEPS),
         steps_after_success=cfg.train.expert_steps_after_success, goal=cfg.env.goal)
     return [embed_episode(episode, encoder) if encoder is not None else episode
             for episode in experts]
@@ -169,7 +168,7 @@ def describe_relay(cfg: DictConfig, relay: RelayExploration | NoRelay) -> str:
 
 
 def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor, positive_states: int,
-               finetune: bool) -> RelayExploration | NoRelay:
+               finetune: bool, devices: Devices) -> RelayExploration | NoRelay:
     """FuRL's relay exploration (``train.relay*``): a second SAC agent on the sparse task reward,
     built from its own seed so the run's other random streams are those of a run without relay;
     off from the start when ``positive_states`` already meet ``train.relay_threshold``.
@@ -183,11 +182,11 @@ def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor, positiv
                              active=positive_states < cfg.train.relay_threshold)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(cfg.env.seed + RELAY_SEED_OFFSET)
-        relay_actor, relay_critics = make_sac_agent(cfg, env)
+        relay_actor, relay_critics = make_sac_agent(cfg, env, devices)
         loss, optimizer = make_sac_loss(cfg, relay_actor, relay_critics,
                                         env.action_spec.shape[-1])
-    device = resolve_device(cfg.train.device)
-    policy = RelayPolicy(actor, relay_actor, schedule, env.action_spec_unbatched.to(device),
+    policy = RelayPolicy(actor, relay_actor, schedule,
+                         env.action_spec_unbatched.to(devices.train),
                          noise=cfg.train.relay_noise)
     return RelayExploration(policy, loss, optimizer,
                             make_sac_update(cfg, loss, optimizer))
@@ -211,10 +210,10 @@ def replay_capacity(cfg: DictConfig, expert_rows: int = 0, saved: int | None = N
     return max(capacity, saved or 0)
 
 
-def make_replay_buffer(cfg: DictConfig, capacity: int,
-                       reward: TemporalReward | None) -> EpisodeReplayBuffer:
-    """Whole episodes on ``replay_buffer.device``; ``sample()`` gives SAC batches on
-    ``train.device`` relabelled by ``reward``'s current heads, ``finetuning.sample()`` the heads'
+def make_replay_buffer(cfg: DictConfig, capacity: int, reward: TemporalReward | None,
+                       devices: Devices) -> EpisodeReplayBuffer:
+    """Whole episodes on the replay device; ``sample()`` gives SAC batches on the train device
+    relabelled by ``reward``'s current heads, ``finetuning.sample()`` the heads'
     batches; the preloaded experts are permanent. k and the window come from ``reward``, as
     the env's history transform takes them (``reward.k`` without a reward)."""
     return EpisodeReplayBuffer(
@@ -223,8 +222,7 @@ def make_replay_buffer(cfg: DictConfig, capacity: int,
         label_window=cfg.reward.label_window, gap=cfg.reward.gap,
         permanent_episodes=cfg.train.preload_positives, reward=reward,
         batch_size=cfg.sac.batch_size, finetuning_batch_size=cfg.reward.batch_size,
-        device=resolve_device(cfg.replay_buffer.device, cfg.train.device),
-        batch_device=resolve_device(cfg.train.device))
+        device=devices.replay, batch_device=devices.train)
 
 
 def make_reward_trainer(cfg: DictConfig, reward: TemporalReward, goal_image: torch.Tensor,
@@ -236,11 +234,11 @@ def make_reward_trainer(cfg: DictConfig, reward: TemporalReward, goal_image: tor
                              compile=cfg.compile.enabled, compile_mode=cfg.compile.mode)
 
 
-def make_sac_agent(cfg: DictConfig,
-                   env: EnvBase) -> tuple[ProbabilisticActor, StackedQValueNetwork]:
-    """Tanh-Gaussian actor and twin Q-networks (stacked) on ``train.device``, MLPs on the state
+def make_sac_agent(cfg: DictConfig, env: EnvBase,
+                   devices: Devices) -> tuple[ProbabilisticActor, StackedQValueNetwork]:
+    """Tanh-Gaussian actor and twin Q-networks (stacked) on the train device, MLPs on the state
     (the prior work's SAC)."""
-    device = resolve_device(cfg.train.device)
+    device = devices.train
     action_spec = env.action_spec_unbatched.to(device)
     action_dim = action_spec.shape[-1]
     actor_net = nn.Sequential(
@@ -307,31 +305,31 @@ def make_sac_update(cfg: DictConfig, loss: StackedCriticSACLoss,
 
 
 def make_collector(cfg: DictConfig, env: EnvBase, actor: TensorDictModuleBase,
-                   random_frames: int) -> Collector:
+                   random_frames: int, devices: Devices) -> Collector:
     """One vector step (``env.num_envs`` env steps) per iteration, so every step is followed by
     its updates (the thesis's schedule); uniform random actions for the first ``random_frames``
-    steps, then the actor's samples (on ``train.device``, compiled with ``compile.enabled``).
+    steps, then the actor's samples (on the train device, compiled with ``compile.enabled``).
     The collector resets each env when its episode ends."""
     num_envs = cfg.env.num_envs
     return Collector(env, actor, frames_per_batch=num_envs, total_frames=-1,
                      init_random_frames=-(-random_frames // num_envs) * num_envs,
                      exploration_type=ExplorationType.RANDOM,
-                     policy_device=resolve_device(cfg.train.device), env_device=env.device,
+                     policy_device=devices.train, env_device=env.device,
                      storing_device=env.device,
                      compile_policy=({"options": compile_options(cfg.compile.mode)}
                                      if cfg.compile.enabled else None),
                      auto_register_policy_transforms=False)
 
 
-def make_evaluation(cfg: DictConfig) -> PolicyEvaluation | None:
+def make_evaluation(cfg: DictConfig, devices: Devices) -> PolicyEvaluation | None:
     """The evaluation episodes ``eval.*`` asks for (None with ``eval.every=null``), on the
-    run's task, goal setting and episode length, the policy on ``train.device``."""
+    run's task, goal setting and episode length, the policy on the train device."""
     if cfg.eval.every is None:
         return None
     return PolicyEvaluation(cfg.env.task, cfg.env.seed, goal=cfg.env.goal,
                             episodes=cfg.eval.episodes,
                             max_episode_steps=cfg.env.max_episode_steps,
-                            device=resolve_device(cfg.train.device))
+                            device=devices.train)
 
 
 def make_logger(cfg: DictConfig, run_dir: Path) -> RunLogger:

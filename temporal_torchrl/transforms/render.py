@@ -17,6 +17,7 @@ from torchrl.data import Bounded, Composite
 from torchrl.envs import EnvBase
 from torchrl.envs.transforms import Transform
 
+from temporal_torchrl import defaults
 from temporal_torchrl._headless_gl import match_mujoco_backend
 
 
@@ -69,8 +70,8 @@ class RenderTransform(Transform):
         torch.Size([3, 64, 64, 3])
     """
 
-    def __init__(self, camera: str = "corner2", image_size: int | tuple[int, int] = 224,
-                 fast: bool = True, out_key: str = "pixels") -> None:
+    def __init__(self, camera: str = defaults.CAMERA, image_size: int | tuple[int, int] = 224,
+                 fast: bool = defaults.FAST_RENDER, out_key: str = "pixels") -> None:
         height, width = _parse_image_size(image_size)
         if not isinstance(camera, str) or not camera:
             raise ValueError(

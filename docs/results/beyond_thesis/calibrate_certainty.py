@@ -29,6 +29,7 @@ from hydra import compose, initialize_config_dir
 
 from temporal_torchrl.configs.rules import (
     config_tasks,
+    resolve_device,
     validate_reward_quality_config,
 )
 from temporal_torchrl.machine import machine_description
@@ -90,7 +91,7 @@ def main(overrides: list[str]) -> None:
     with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
         cfg = compose("evaluate_rewards", overrides=overrides)
     cfg = validate_reward_quality_config(cfg)
-    encoder = factories.make_encoder(cfg)
+    encoder = factories.make_encoder(cfg, resolve_device(cfg.encoder.device))
     start = time.perf_counter()
     tasks = config_tasks(cfg)
     per_task = {task: task_targets(task_config(cfg, task), encoder)

@@ -31,6 +31,7 @@ from torch import Tensor
 
 from temporal_torchrl.configs.rules import (
     config_tasks,
+    resolve_device,
     validate_reward_quality_config,
 )
 from temporal_torchrl.machine import machine_description
@@ -117,7 +118,7 @@ def main(overrides: list[str]) -> None:
         cfg = compose("evaluate_rewards", overrides=overrides)
     cfg = validate_reward_quality_config(cfg)
     start = time.perf_counter()
-    encoder = factories.make_encoder(cfg)
+    encoder = factories.make_encoder(cfg, resolve_device(cfg.encoder.device))
     tasks = config_tasks(cfg)
     per_task = {task: task_shapes(task_config(cfg, task), encoder)
                 for task in tasks}

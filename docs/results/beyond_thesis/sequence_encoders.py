@@ -29,6 +29,7 @@ from torch import Tensor, nn
 
 from temporal_torchrl.configs.rules import (
     config_tasks,
+    resolve_device,
     validate_reward_quality_config,
 )
 from temporal_torchrl.machine import machine_description
@@ -149,7 +150,7 @@ def main(overrides: list[str]) -> None:
         lines.append(f"| {name} | {parameters[0]:,} | {parameters[1]:,} | "
                      f"{milliseconds[0]:.1f} | {milliseconds[1]:.1f} |")
         print(lines[-1], flush=True)
-    encoder = factories.make_encoder(cfg)
+    encoder = factories.make_encoder(cfg, resolve_device(cfg.encoder.device))
     tasks = config_tasks(cfg)
     per_task = {task: task_scores(task_config(cfg, task), encoder)
                 for task in tasks}
