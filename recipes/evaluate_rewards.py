@@ -109,6 +109,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
                     same_position=cfg.reward.same_position)
             scores = score_reward(reward, successful, failed)
             rows.append({"variant": variant, "kind": scores.kind, "heads": state,
+                         "options": reward.options,
                          "value_order_correlation": scores.value_order_correlation,
                          "value_order_correlation_std": scores.value_order_correlation_std,
                          "direction_accuracy": scores.direction_accuracy,
@@ -148,8 +149,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
         "finetuning": {"stage": cfg.finetune.stage, "updates": cfg.finetune.updates,
                        **{key: cfg.reward[key] for key in (
                            "batch_size", "lr", "delta", "l2_margin", "gap", "same_position",
-                           "label_window", "k", "alpha", "projection", "window",
-                           "certainty_bandwidth", "certainty_prior")},
+                           "label_window", "k", "alpha", "projection")},
                        "options": OmegaConf.to_container(cfg.reward.options, resolve=True)},
         "run": {"command": command, "machine": machine_description(),
                 "seconds": time.perf_counter() - start, "dataset_seconds": dataset_seconds,

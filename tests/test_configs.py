@@ -265,3 +265,74 @@ def test_reward_options_are_those_the_configured_rewards_declare(example_reward_
                                          r"an option of d3 or d_sharp: sharpness, margin"):
         validate_reward_quality_config(composed("evaluate_rewards", *listed,
                                                 "+reward.options.temperature=1"))
+
+
+def validated_with_warnings(validate, config_name: str, *overrides: str):
+    """``validate`` of the composed config, and the messages of the FutureWarnings it gave."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cfg = validate(composed(config_name, *overrides))
+    return cfg, [str(warning.message) for warning in caught
+                 if warning.category is FutureWarning]
+
+
+def test_the_built_in_options_are_set_under_reward_options_and_the_old_keys_still_work():
+    """d_sequence's window and d_certainty's certainty estimate are set as any reward's options
+    are (``+reward.options.window=12``). The keys that set them before (``reward.window``,
+    ``reward.certainty_bandwidth``, ``reward.certainty_prior``) still work for one release:
+    moved into ``reward.options`` with a FutureWarning naming the new key, silently ignored at
+    their old default (what every saved config holds), refused when they disagree with the new
+    key, and refused, naming where they came from, for a reward that has no such option."""
+    from temporal_torchrl.rewards import reward_from_config
+
+    sequence = "reward.directional=d_sequence"
+    new, warned = validated_with_warnings(validate_recipe_config, "config", sequence,
+                                          "+reward.options.window=12")
+    old, old_warned = validated_with_warnings(validate_recipe_config, "config", sequence,
+                                              "reward.window=12")
+    assert warned == [] and len(old_warned) == 1
+    assert old_warned[0].startswith("config reward.window=12 is deprecated and read as "
+                                    "reward.options.window=12; set that instead "
+                                    "(+reward.options.window=12 on the command line")
+    for cfg in (new, old):
+        assert OmegaConf.to_container(cfg.reward.options) == {"window": 12}
+        assert cfg.reward.window is None
+        # The option reaches the reward: a d_sequence over windows of 12 embeddings.
+        reward = reward_from_config(cfg, *torch.randn(2, 4))
+        assert reward.window_length == 12 and reward.directional_heads.image.length == 11
+    cfg, warned = validated_with_warnings(validate_recipe_config, "config", sequence,
+                                          "reward.window=8", "reward.certainty_bandwidth=0.1",
+                                          "reward.certainty_prior=1.0")
+    assert warned == [] and OmegaConf.to_container(cfg.reward.options) == {}
+    assert reward_from_config(cfg, *torch.randn(2, 4)).window_length == 8
+    cfg, warned = validated_with_warnings(validate_recipe_config, "config", "reward.directional=d3",
+                                          "reward.certainty_scaling=true",
+                                          "reward.certainty_prior=2")
+    assert OmegaConf.to_container(cfg.reward.options) == {"certainty_prior": 2.0}
+    assert warned[0].startswith("config reward.certainty_prior=2.0 is deprecated")
+    assert reward_from_config(cfg, *torch.randn(2, 4)).certainty.prior == 2.0
+    with pytest.raises(ValueError, match=r"config reward\.window=12 and reward\.options\.window"
+                                         r"=10 disagree"):
+        validate_recipe_config(composed("config", sequence, "reward.window=12",
+                                        "+reward.options.window=10"))
+    with pytest.raises(ValueError, match=r"config reward\.options\.window=4 is invalid: expected "
+                                         r"an option of furl or d3: they declare none"):
+        validate_recipe_config(composed("config", "+reward.options.window=4"))
+    with pytest.raises(ValueError, match=r"reward\.options\.certainty_bandwidth=0\.2 is invalid"
+                                         r".*\(set as the deprecated reward\.certainty_"
+                                         r"bandwidth\)"):
+        validate_recipe_config(composed("config", "reward.certainty_bandwidth=0.2"))
+    # The offline benchmark: the option of any listed variant, each variant gets its own.
+    listed = ["reward.positional=none", "reward.directional=[d3,d_sequence]"]
+    cfg, warned = validated_with_warnings(validate_reward_quality_config, "evaluate_rewards",
+                                          *listed, "reward.window=4")
+    assert OmegaConf.to_container(cfg.reward.options) == {"window": 4} and len(warned) == 1
+    assert reward_from_config(cfg, *torch.randn(2, 4), variant="d_sequence").window_length == 4
+    with pytest.raises(ValueError, match=r"reward\.options\.window=4 is invalid: expected an "
+                                         r"option of d3 or d_certainty: certainty_bandwidth, "
+                                         r"certainty_prior"):
+        validate_reward_quality_config(composed("evaluate_rewards", "reward.positional=none",
+                                                "reward.directional=[d3,d_certainty]",
+                                                "+reward.options.window=4"))

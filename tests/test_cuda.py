@@ -159,10 +159,11 @@ def finetuning_losses_on(device: str, tmp_path: Path, stage: int, directional: s
     CPU and on ``device``, from the same heads and batch: for each loss, its value and its
     parameters' gradients on each side."""
     dim = 8
-    cfg = config(tmp_path, f"reward.directional={directional}", "reward.window=4")
+    cfg = config(tmp_path, f"reward.directional={directional}")
     torch.manual_seed(0)
     reward = make_temporal_reward("drawer-open", load_encoder("state", dim=dim), k=2,
-                                  positional="furl", directional=directional, window_length=4)
+                                  positional="furl", directional=directional,
+                                  options={"window": 4} if directional == "d_sequence" else {})
     buffer = EpisodeReplayBuffer(capacity=200, history=2, window_length=reward.window_length,
                                  gap=5)
     buffer.extend(episode_rows(make_episode(0, 20, dim=dim), embedding_dtype=torch.float32))

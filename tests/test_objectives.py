@@ -233,7 +233,7 @@ def test_directional_loss_of_a_window_reward_by_hand():
     gen = torch.Generator().manual_seed(5)
     dim, length = 6, 4
     reward = TemporalReward(dim, torch.randn(dim, generator=gen), torch.randn(dim, generator=gen),
-                            positional=None, directional="d_sequence", window_length=length)
+                            positional=None, directional="d_sequence", options={"window": length})
     goal = torch.randn(dim, generator=gen)
     loss = DirectionalLoss(reward, goal, stage=2)
     negative, positive = (window_states(gen, 5, dim, length) for _ in range(2))

@@ -4,6 +4,7 @@ directories, bad config (resume: test_resume.py)."""
 import json
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -192,7 +193,7 @@ def test_a_reward_from_reward_modules_trains_and_resumes(tmp_path):
 
 @pytest.mark.parametrize("overrides", [
     ("reward.directional=d_certainty",),
-    ("reward.directional=d_sequence", "reward.window=4"),
+    ("reward.directional=d_sequence", "+reward.options.window=4"),
     ("reward.directional=d3", "reward.certainty_scaling=true"),
 ], ids=["d_certainty", "d_sequence", "d3_certainty_scaling"])
 def test_beyond_thesis_rewards_train_and_resume_exactly(tmp_path, overrides):
@@ -357,6 +358,37 @@ def test_default_run_directories_tell_reward_options_apart():
     assert options_digest({"sharpness": 2.5}) != options_digest({"sharpness": 2})
 
 
+def test_default_run_directories_of_the_built_in_options_keep_their_names():
+    """d_sequence's window and d_certainty's certainty estimate are reward options now: a run
+    of their defaults keeps the directory it had (no ``_opt``: only options set name it), and
+    so does one given a deprecated key at its old default, which every saved run's config.json
+    holds; a deprecated key set to another value names the directory its option does."""
+    from temporal_torchrl.configs.rules import validate_recipe_config
+    from temporal_torchrl.runs.naming import options_digest
+
+    def run_dir(*overrides, deprecated: str | None = None):
+        with initialize_config_dir(config_dir=str(RECIPES), version_base=None):
+            cfg = compose("config", overrides=list(overrides))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            validated = validate_recipe_config(cfg)
+        assert [str(warning.message).split(" is deprecated")[0] for warning in caught
+                if warning.category is FutureWarning] == ([deprecated] if deprecated else [])
+        # Named from the composed config (a sweep job's) and from the validated one alike.
+        assert default_run_dir(validated) == default_run_dir(cfg)
+        return default_run_dir(cfg)
+
+    before = "runs/drawer-open/metaworld_small_furl+{}_rho1_lambda4_generic{}_stage1/seed0"
+    sequence, certainty = "reward.directional=d_sequence", "reward.directional=d_certainty"
+    assert run_dir(sequence) == Path(before.format("d_sequence", "")) == run_dir(
+        sequence, "reward.window=8")
+    assert run_dir(certainty) == Path(before.format("d_certainty", "")) == run_dir(
+        certainty, "reward.certainty_bandwidth=0.1", "reward.certainty_prior=1.0")
+    twelve = Path(before.format("d_sequence", f"_opt{options_digest({'window': 12})}"))
+    assert run_dir(sequence, "+reward.options.window=12") == twelve == run_dir(
+        sequence, "reward.window=12", deprecated="config reward.window=12")
+
+
 @pytest.mark.slow
 def test_rendering_with_random_liv_checkpoint(tmp_path):
     """A new user's command with a local LIV checkpoint: the output is the recipe's own lines,
@@ -416,6 +448,10 @@ def test_default_config_renders_and_uses_the_shipped_encoder(tmp_path, capsys):
     ("reward.positional=p9", "reward.positional"), ("reward.directional=d7", "reward.directional"),
     ("reward.window=1", "reward.window"), ("reward.certainty_prior=0", "reward.certainty_prior"),
     ("reward.certainty_bandwidth=-1", "reward.certainty_bandwidth"),
+    ("reward.directional=d_sequence +reward.options.window=1", "reward.options.window=1"),
+    ("reward.directional=d_certainty +reward.options.certainty_prior=0",
+     "reward.options.certainty_prior=0"),
+    ("+reward.options.window=4", "expected an option of furl or d3: they declare none"),
     ("reward.certainty_scaling=maybe", "reward.certainty_scaling"),
     ("reward.directional=none reward.certainty_scaling=true", "it scales r_D"),
     ("reward.rho=-0.1", "reward.rho"), ("reward.lambda_=-1", "reward.lambda_"),

@@ -516,7 +516,7 @@ def test_reward_curves_give_a_sequence_reward_its_window():
     torch.manual_seed(0)
     dim, length = 6, 4
     reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional="furl",
-                            directional="d_sequence", window_length=length, k=2)
+                            directional="d_sequence", options={"window": length}, k=2)
     s = torch.randn(9, dim)
     positional, directional = episode_rewards(reward, s)
     with torch.no_grad():
@@ -612,7 +612,7 @@ def test_missing_runs_and_metrics_are_named(tmp_path):
 
 @pytest.mark.parametrize("overrides", [
     ("reward.directional=d3", "reward.certainty_scaling=true"),
-    ("reward.directional=d_sequence", "reward.window=4"),
+    ("reward.directional=d_sequence", "+reward.options.window=4"),
 ])
 @pytest.mark.slow
 def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
@@ -634,8 +634,9 @@ def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
     stored = torch.load(run_dir / "replay" / "000000.pt", weights_only=True)
     embeddings = stored["embedding"].float()
     steps = torch.arange(len(embeddings))
-    window = embeddings[(steps.unsqueeze(-1) - torch.arange(cfg.reward.window - 1, -1, -1)
-                         ).clamp_min(0)]
+    length = trained.window_length  # None: a reward that reads no window
+    window = embeddings[(steps.unsqueeze(-1) - torch.arange(length - 1, -1, -1)).clamp_min(0)
+                        ] if length else None
     with torch.no_grad():
         parts = trained(embeddings, embeddings[:1].expand_as(embeddings),
                         embeddings[(steps - cfg.reward.k).clamp_min(0)],

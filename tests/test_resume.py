@@ -340,6 +340,46 @@ def test_resume_continues_with_the_saved_config(tmp_path, capsys):
     assert "not using the current values of env.task" in capsys.readouterr().out
 
 
+def test_a_run_saved_with_the_deprecated_reward_keys_resumes_as_it_was(tmp_path):
+    """Runs saved before d_sequence's and d_certainty's hyperparameters became reward options
+    hold reward.window, reward.certainty_bandwidth and reward.certainty_prior in config.json
+    (at 8, 0.1 and 1.0 unless changed) and no reward.options. At the defaults such a run
+    resumes in the directory its name had, without a warning, even when the command line
+    restates a key; a changed key resumes as its option, with a FutureWarning naming it."""
+    import warnings
+
+    def saved_as_before(run_dir: Path, window: int) -> None:
+        saved_config = run_dir / "config.json"
+        saved = json.loads(saved_config.read_text())
+        assert saved["reward"]["window"] is None  # this version writes the options
+        saved["reward"].update(window=window, certainty_bandwidth=0.1, certainty_prior=1.0)
+        del saved["reward"]["options"]
+        saved_config.write_text(json.dumps(saved))
+
+    common = ["reward.directional=d_sequence", "train.episodes=2", "output_dir=null",
+              f"runs_dir={tmp_path}"]
+    sac_temporal.train(config(tmp_path, *common, "train.stop_after_episodes=1"))
+    run_dir = tmp_path / "drawer-open" / "state_furl+d_sequence_rho1_lambda4_generic_stage1"
+    saved_as_before(run_dir / "seed0", window=8)
+    overrides = [*common, "resume=true", "reward.window=8"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FutureWarning)
+        summary = sac_temporal.train(config(tmp_path, *overrides), override_keys(overrides))
+    assert summary["episodes"] == 2 and summary["config"]["reward"]["options"] == {}
+    assert len(episode_rows(run_dir / "seed0")) == 2
+    assert [path.name for path in tmp_path.iterdir()] == ["drawer-open"]
+    assert [path.name for path in run_dir.parent.iterdir()] == [run_dir.name]
+
+    # A run of a 4-embedding window: its heads (a 3-token encoder) load again only if it is.
+    sac_temporal.train(config(tmp_path, "reward.directional=d_sequence", "train.episodes=2",
+                              "+reward.options.window=4", "train.stop_after_episodes=1"))
+    saved_as_before(tmp_path / "run", window=4)
+    with pytest.warns(FutureWarning, match=r"config reward\.window=4 is deprecated and read as "
+                                           r"reward\.options\.window=4"):
+        summary = sac_temporal.train(config(tmp_path, "resume=true", "train.episodes=2"))
+    assert summary["episodes"] == 2 and summary["config"]["reward"]["options"] == {"window": 4}
+
+
 def test_a_run_of_another_config_in_its_directory_is_refused(tmp_path):
     # A sweep over a key the directory's name does not tell apart (sac.lr) maps its jobs to one
     # directory: the second job must fail, naming the key, not continue the first job's run.

@@ -147,7 +147,7 @@ def test_a_window_reward_sees_the_same_window_everywhere(tmp_path):
     register_reward("recording_d", recording, kind="directional", image_input="window")
     try:
         sac_temporal.train(config(tmp_path, "reward.positional=none",
-                                  "reward.directional=recording_d", "reward.window=6",
+                                  "reward.directional=recording_d", "+reward.options.window=6",
                                   "replay_buffer.embedding_dtype=float32", "train.episodes=2"))
     finally:
         unregister_reward("recording_d")

@@ -438,7 +438,7 @@ def test_recipe_scores_every_variant_end_to_end(tmp_path, my_reward_module):
 def test_recipe_writes_a_summary_for_several_tasks(tmp_path):
     cfg = config(tmp_path, "env.task=[button-press-topdown,window-close]",
                  "reward.positional=[liv,furl]", "reward.directional=[d3,d_certainty,d_sequence]",
-                 "reward.window=4", "figures=false")
+                 "+reward.options.window=4", "figures=false")
     results = evaluate_rewards.evaluate(cfg)
     assert [result["task"] for result in results] == ["button-press-topdown", "window-close"]
     summary = (tmp_path / "out" / "summary.md").read_text()

@@ -589,7 +589,7 @@ def test_d_sequence_of_the_straight_path_without_its_window(embeddings):
             DIRECTIONAL["d_sequence"](heads, s, s_prev=s_prev, g=g, b=b, position=position),
             sequence_reward_by_definition(heads, straight, position, g, b), rtol=1e-5,
             atol=1e-6)
-    reward = _temporal(positional=None, directional="d_sequence", window_length=WINDOW)
+    reward = _temporal(positional=None, directional="d_sequence", options={"window": WINDOW})
     expected = DIRECTIONAL["d_sequence"](
         reward.directional_heads, s, window=straight_window(s_prev, s, WINDOW), position=s_prev,
         g=reward.goal_embedding, b=reward.baseline_embedding)
@@ -729,8 +729,9 @@ def test_certainty_scaling_multiplies_the_directional_reward_by_the_certainty(em
     references = (s, s - s_prev, torch.tensor([1.0, 1.0, -1.0, -1.0]))
     reward.certainty.remember(*references)
     r_d3 = reward.directional_reward(s, s_prev, s0)
-    t = direction_certainty(s, s - s_prev, *references, bandwidth=reward.certainty_bandwidth,
-                            prior=reward.certainty_prior)
+    t = direction_certainty(s, s - s_prev, *references,
+                            bandwidth=reward.options["certainty_bandwidth"],
+                            prior=reward.options["certainty_prior"])
     assert (t[:2] > 0.4).all() and (t[2:] < -0.4).all()
     torch.testing.assert_close(reward(s, s0, s_prev, success)["directional_reward"].squeeze(-1),
                                r_d3 * t.abs())
@@ -745,10 +746,10 @@ def test_certainty_scaling_multiplies_the_directional_reward_by_the_certainty(em
 
 def test_window_reward_needs_its_window(embeddings):
     s, s0, s_prev, _, _, _ = embeddings
-    reward = _temporal(positional="furl", directional="d_sequence", window_length=WINDOW)
+    reward = _temporal(positional="furl", directional="d_sequence", options={"window": WINDOW})
     assert reward.window_length == WINDOW
     assert reward.directional_heads.image.length == WINDOW - 1
-    assert _temporal(directional="d3", window_length=WINDOW).window_length is None
+    assert _temporal(directional="d3").window_length is None
     success = torch.zeros(BATCH, 1, dtype=torch.bool)
     window = path(s, s_prev)
     out = reward(s, s0, s_prev, success, window=window)
@@ -759,8 +760,69 @@ def test_window_reward_needs_its_window(embeddings):
         reward(s, s0, s_prev, success)
     with pytest.raises(ValueError, match=r"expected \[\.\.\., 4, 5\]"):
         reward(s, s0, s_prev, success, window=window[:, 1:])
-    with pytest.raises(ValueError, match="window_length=1"):
-        _temporal(directional="d_sequence", window_length=1)
+    with pytest.raises(ValueError, match=r"option window=1 of reward 'd_sequence'; expected an "
+                                         r"integer >= 2"):
+        _temporal(directional="d_sequence", options={"window": 1})
+
+
+def test_the_built_in_hyperparameters_are_registered_options(registry, embeddings):
+    """d_sequence's K and d_certainty's beta and c are registry options, with the defaults of
+    temporal_torchrl.defaults, set as any reward's are (options=); a window reward or a
+    certainty-trained reward of one's own has them too. d_sequence's function is not passed K
+    (it receives the window itself as ``window``); the others receive their options."""
+    from temporal_torchrl import defaults
+    from temporal_torchrl.objectives import CertaintyLoss
+
+    s, s0, s_prev, _, _, _ = embeddings
+    certainty = {"certainty_bandwidth": defaults.CERTAINTY_BANDWIDTH,
+                 "certainty_prior": defaults.CERTAINTY_PRIOR}
+    assert dict(REWARDS["d_sequence"].options) == {"window": defaults.WINDOW_LENGTH}
+    assert dict(REWARDS["d_certainty"].options) == certainty
+    assert all(not REWARDS[name].options for name in ("furl", "p1", "d3", "d5", "liv"))
+    assert _temporal(directional="d_sequence").window_length == defaults.WINDOW_LENGTH
+    twelve = _temporal(directional="d_sequence", options={"window": 12})
+    assert twelve.window_length == 12 and twelve.directional_heads.image.length == 11
+    assert twelve.part_options("d_sequence") == {}
+    wide = _temporal(directional="d_certainty", options={"certainty_bandwidth": 0.3})
+    assert wide.options == {**certainty, "certainty_bandwidth": 0.3}
+    assert wide.part_options("d_certainty") == wide.options
+    assert CertaintyLoss(wide, torch.randn(D), stage=1).reward.options["certainty_bandwidth"] \
+        == 0.3
+    # certainty_scaling gives the reward it scales the certainty options, for its estimate.
+    scaled = _temporal(directional="d3", certainty_scaling=True,
+                       options={"certainty_prior": 2, "certainty_bandwidth": 0.2})
+    assert (scaled.certainty.bandwidth, scaled.certainty.prior) == (0.2, 2.0)
+    assert scaled.part_options("d3") == {}
+    with pytest.raises(ValueError, match="options 'window': not an option of furl or d3"):
+        _temporal(options={"window": 12})
+    with pytest.raises(ValueError, match="options 'certainty_prior': not an option of furl or "
+                                         "d3"):
+        _temporal(options={"certainty_prior": 2.0})
+    with pytest.raises(ValueError, match=r"option certainty_prior=0\.0 of reward "
+                                         r"'certainty_scaling'; expected a number > 0"):
+        _temporal(directional="d3", certainty_scaling=True, options={"certainty_prior": 0})
+    with pytest.raises(ValueError, match=r"option window=12\.0 of reward 'd_sequence'; expected "
+                                         r"an integer >= 2"):
+        _temporal(directional="d_sequence", options={"window": 12.0})
+    # Rewards of one's own: by their layout and objective, alike.
+    seen = {}
+
+    def window_reward(heads, s, *, window=None, **keywords):
+        seen.update(keywords)
+        return DIRECTIONAL["d_sequence"](heads, s, window=window, **keywords)
+
+    registry("d6", window_reward, kind="directional", image_input="window")
+    registry("d7", toy_directional, kind="directional", image_input="concatenated",
+             objective="certainty")
+    assert dict(REWARDS["d6"].options) == {"window": defaults.WINDOW_LENGTH}
+    assert dict(REWARDS["d7"].options) == certainty
+    own = _temporal(positional=None, directional="d6", options={"window": 3})
+    own.directional_reward(s, s_prev, s0, window=path(s, s_prev)[:, -3:])
+    assert own.window_length == 3 and "window" not in seen
+    for reserved in ("window", "certainty_prior"):
+        with pytest.raises(ValueError, match=f"option '{reserved}' is"):
+            register_reward("d8", toy_directional, kind="directional",
+                            image_input="concatenated", options={reserved: 4.0})
 
 
 def test_objectives_are_registered_and_checked(registry):
@@ -814,7 +876,7 @@ def test_a_reward_declares_its_options_and_receives_their_values(registry, embed
         _temporal(options={"scale": 3.0})
     for bad, expected_type in (({"steps": 2.5}, "int"), ({"clipped": 1}, "bool"),
                                ({"scale": "big"}, "float")):
-        with pytest.raises(ValueError, match=f"expected a {expected_type} like its default"):
+        with pytest.raises(ValueError, match=f"expected a {expected_type} like d6's default"):
             _temporal(positional="p6", directional="d6", options=bad)
 
 
@@ -887,3 +949,36 @@ def test_reward_options_from_a_config(registry):
     # A run older than reward.options: none.
     del config["reward"]["options"]
     assert reward_options(config)["options"] == {}
+
+
+def test_a_config_with_the_deprecated_reward_keys_means_their_options():
+    """A run's config.json saved before d_sequence's and d_certainty's hyperparameters became
+    reward options holds reward.window, reward.certainty_bandwidth and reward.certainty_prior,
+    at their defaults unless changed: at the defaults they set nothing (the reward is the
+    default one), changed they set the option of the same name; set both ways and differing,
+    refused naming both."""
+    from omegaconf import OmegaConf
+
+    from temporal_torchrl.configs import RecipeConfig
+    from temporal_torchrl.rewards import reward_options
+    from temporal_torchrl.rewards.config import with_moved_options
+
+    config = OmegaConf.to_container(OmegaConf.structured(RecipeConfig))
+    del config["reward"]["options"]
+    config["reward"].update(directional="d_sequence", window=8, certainty_bandwidth=0.1,
+                            certainty_prior=1.0)
+    assert reward_options(config)["options"] == {}
+    assert with_moved_options(config)["reward"] == {
+        **config["reward"], "window": None, "certainty_bandwidth": None, "certainty_prior": None,
+        "options": {}}
+    config["reward"]["window"] = 12
+    assert reward_options(config)["options"] == {"window": 12}
+    assert reward_options(config, variant="d_certainty")["options"] == {}
+    assert with_moved_options(config)["reward"]["options"] == {"window": 12}
+    config["reward"]["options"] = {"window": 12}
+    assert reward_options(config)["options"] == {"window": 12}
+    config["reward"]["options"] = {"window": 10}
+    with pytest.raises(ValueError, match=r"config reward\.window=12 and reward\.options\."
+                                         r"window=10 disagree: reward\.window is the deprecated "
+                                         r"spelling of reward\.options\.window"):
+        reward_options(config)

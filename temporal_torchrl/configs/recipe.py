@@ -104,8 +104,12 @@ class SharedRewardConfig:
     directional: str | None = defaults.DIRECTIONAL_REWARD
     #: .py files or module names imported first, to ``register_reward`` your own.
     modules: list[str] = field(default_factory=list)
-    #: The parts' own options (``register_reward(..., options=...)``), each added with ``+``:
-    #: ``+reward.options.<name>=<value>``; an option not given keeps its registered default.
+    #: The parts' options, each added with ``+``: ``+reward.options.<name>=<value>``; an
+    #: option not given keeps its registered default. d_sequence: ``window``, K, the embeddings
+    #: s_(t-K+1) .. s_t its sequence encoder reads; d_certainty (and ``certainty_scaling``):
+    #: ``certainty_bandwidth``, the kernel width beta in median distances, and
+    #: ``certainty_prior``, the pseudo-count c (little evidence: a target near 0); your own:
+    #: those ``register_reward(..., options=...)`` declares.
     options: dict[str, Any] = field(default_factory=dict)
     #: k, the history offset of s_{t-k}.
     k: int = constrained(defaults.HISTORY, ge=1)
@@ -129,12 +133,15 @@ class SharedRewardConfig:
     lr: float = constrained(defaults.HEADS_LEARNING_RATE, gt=0)
     #: Positives and negatives are sampled from the most recent this many of each kind.
     label_window: int | None = constrained(defaults.LABEL_WINDOW, ge=1)
-    #: d_sequence: K, the embeddings s_(t-K+1) .. s_t its sequence encoder reads.
-    window: int = constrained(defaults.WINDOW_LENGTH, ge=2)
-    #: d_certainty's target: the kernel width beta, in median distances.
-    certainty_bandwidth: float = constrained(defaults.CERTAINTY_BANDWIDTH, gt=0)
-    #: d_certainty's target: the pseudo-count c (little evidence: a target near 0).
-    certainty_prior: float = constrained(defaults.CERTAINTY_PRIOR, gt=0)
+    #: Deprecated (one more release): ``reward.options.window``, which it is read as (null:
+    #: not set; so is its old default, 8, which every saved run's config.json holds).
+    window: int | None = constrained(None, ge=2)
+    #: Deprecated (one more release): ``reward.options.certainty_bandwidth`` (null, or 0.1:
+    #: not set).
+    certainty_bandwidth: float | None = constrained(None, gt=0)
+    #: Deprecated (one more release): ``reward.options.certainty_prior`` (null, or 1.0: not
+    #: set).
+    certainty_prior: float | None = constrained(None, gt=0)
 
 
 @dataclass

@@ -19,7 +19,8 @@ import re
 import sys
 import types
 import typing
-from collections.abc import Mapping, Sequence
+import warnings
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,9 +33,14 @@ from temporal_torchrl.configs.recipe import RecipeConfig
 from temporal_torchrl.configs.reward_quality import RewardQualityConfig
 from temporal_torchrl.encoders import ENCODERS
 from temporal_torchrl.envs import TASKS, baseline_text
-from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL, REWARDS
-from temporal_torchrl.rewards.config import none_or_name
-from temporal_torchrl.rewards.registry import option_value
+from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
+from temporal_torchrl.rewards.config import (
+    DEPRECATED_KEYS,
+    deprecated_settings,
+    moved_options,
+    none_or_name,
+)
+from temporal_torchrl.rewards.registry import declared_options, option_expected, option_value
 
 _NOUNS = {int: ("an integer", "integers"), float: ("a number", "numbers"),
           str: ("a string", "strings")}
@@ -254,24 +260,52 @@ def _check_reward_names(key: str, names: Sequence[Any], registry: Mapping[str, A
                        "register_reward in a module listed in reward.modules)")
 
 
-def _check_reward_options(options: Mapping[str, Any], variants: Sequence[str]) -> None:
-    """Each ``reward.options`` key an option one of ``variants`` (registered names) declares,
-    its value of the type of that option's default."""
-    declared = {key: (name, default) for name in variants
-                for key, default in REWARDS[name].options.items()}
+def _move_deprecated_keys(reward: DictConfig) -> list[str]:
+    """Move what ``reward.window``, ``reward.certainty_bandwidth`` and ``reward.certainty_prior``
+    (deprecated) set into ``reward.options`` (:func:`~temporal_torchrl.rewards.config.
+    moved_options`), with a ``FutureWarning`` naming the new key for each, and leave the old
+    keys null, so a run stores, names its directory by and resumes with its options in one
+    place. A key at its old default is taken as not set, silently: every saved run's
+    config.json holds the three. Returns the keys moved.
+
+    Raises:
+        ValueError: a key set both ways to different values, naming both.
+    """
+    moved = deprecated_settings(reward)
+    reward.options = moved_options(reward)
+    for key, value in moved.items():
+        warnings.warn(
+            f"config reward.{key}={value!r} is deprecated and read as reward.options.{key}="
+            f"{value!r}; set that instead (+reward.options.{key}={value!r} on the command line, "
+            f"reward.options.{key} in a resumed run's config.json). reward.{key} goes in the "
+            "next release.", FutureWarning, stacklevel=3)
+    for key in DEPRECATED_KEYS:
+        reward[key] = None
+    return list(moved)
+
+
+def _check_reward_options(options: Mapping[str, Any], variants: Sequence[str],
+                          certainty_scaling: bool = False, moved: Collection[str] = ()) -> None:
+    """Each ``reward.options`` key an option one of ``variants`` (registered names) has (or,
+    with ``certainty_scaling``, the scaling's), its value of the type (and, for the built-in
+    options, in the range) of that option's default. ``moved``: the keys set by their
+    deprecated spelling, which the message names."""
+    declared = declared_options(variants, certainty_scaling)
+    owners = [*variants, *(["certainty_scaling"] if certainty_scaling else [])]
     for key, value in options.items():
+        spelled = f" (set as the deprecated reward.{key})" if key in moved else ""
         if key not in declared:
             raise _invalid(f"reward.options.{key}", value,
-                           f"an option of {' or '.join(variants) or 'the reward'}: "
+                           f"an option of {' or '.join(owners) or 'the reward'}: "
                            f"{', '.join(declared) or 'they declare none'} "
-                           "(register_reward(..., options=...) declares a reward's options)")
+                           f"(register_reward(..., options=...) declares a reward's options)"
+                           f"{spelled}")
         name, default = declared[key]
         try:
             option_value(name, key, value, default)
         except ValueError:
             raise _invalid(f"reward.options.{key}", value,
-                           f"a {type(default).__name__} like {name}'s default {default!r}"
-                           ) from None
+                           f"{option_expected(name, key, default)}{spelled}") from None
 
 
 def _check_baseline(task: str, baseline: str) -> None:
@@ -300,9 +334,10 @@ def validate_recipe_config(cfg: DictConfig, source: str | None = None) -> DictCo
     for key, registry in (("positional", POSITIONAL), ("directional", DIRECTIONAL)):
         _check_reward_names(f"reward.{key}", [cfg.reward[key]], registry, cfg.reward[key],
                             "one of")
+    moved = _move_deprecated_keys(cfg.reward)
     _check_reward_options(cfg.reward.options, [
         name for name in map(none_or_name, (cfg.reward.positional, cfg.reward.directional))
-        if name is not None])
+        if name is not None], cfg.reward.certainty_scaling, moved)
     longest = cfg.env.max_episode_steps + 1
     capacity = cfg.replay_buffer.capacity
     if capacity is not None and capacity < longest:
@@ -362,7 +397,8 @@ def validate_reward_quality_config(cfg: DictConfig) -> DictConfig:
     if not config_variants(cfg):
         raise _invalid("reward.positional", cfg.reward.positional,
                        "at least one variant to score in reward.positional or reward.directional")
-    _check_reward_options(cfg.reward.options, config_variants(cfg))
+    moved = _move_deprecated_keys(cfg.reward)
+    _check_reward_options(cfg.reward.options, config_variants(cfg), moved=moved)
     if max(cfg.dataset.random_episodes, cfg.dataset.failed_expert_episodes) < 2:
         raise _invalid("dataset.random_episodes", cfg.dataset.random_episodes,
                        "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from temporal_torchrl.envs import EVALUATION_TASKS
-from temporal_torchrl.rewards.config import has_vlm_reward, none_or_name
+from temporal_torchrl.rewards.config import has_vlm_reward, none_or_name, with_moved_options
 from temporal_torchrl.runs import DEVICE_KEYS, PROCESS_KEYS, RESUMABLE_KEYS
 from temporal_torchrl.runs.layout import (
     flatten,
@@ -52,8 +52,11 @@ def is_process_key(key: str) -> bool:
 
 def configuration_settings(run: Run) -> dict[str, Any]:
     """The run's flattened config without the seed, the task, the process keys and empty groups
-    (``reward.options: {}`` says what a run older than the key says by lacking it)."""
-    return {key: value for key, value in flatten(run.config).items()
+    (``reward.options: {}`` says what a run older than the key says by lacking it), its reward
+    options spelled as now (``reward.window: 8``, which runs saved before the options held,
+    says what a run saved since says by ``reward.window: null``:
+    :func:`~temporal_torchrl.rewards.config.with_moved_options`)."""
+    return {key: value for key, value in flatten(with_moved_options(run.config)).items()
             if key not in RUN_KEYS and not is_process_key(key) and value != {}}
 
 

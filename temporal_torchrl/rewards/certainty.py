@@ -182,5 +182,7 @@ def d_certainty(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None, 
     return _concatenated(heads, position, s - s_prev, g, b)
 
 
+# The certainty objective gives d_certainty its options certainty_bandwidth and certainty_prior
+# (registry.CERTAINTY_OPTIONS), set with reward.options like any reward's.
 register_reward("d_certainty", d_certainty, kind="directional", image_input="concatenated",
                 objective="certainty")

@@ -194,7 +194,8 @@ def d_sequence(heads: RewardHeads, s: Tensor, *, s_prev: Tensor | None = None,
 
 
 # The built-in directional rewards; d3-d5 read position ⊕ direction (2·D),
-# d_sequence a window of K embeddings (K - 1 tokens of 2·D).
+# d_sequence a window of K embeddings (K - 1 tokens of 2·D); its layout gives it the option
+# window, K (registry.WINDOW_OPTIONS), set with reward.options like any reward's.
 register_reward("d1", d1, kind="directional", image_input="embedding")
 register_reward("d2", d2, kind="directional", image_input="embedding")
 register_reward("d3", d3, kind="directional", image_input="concatenated")

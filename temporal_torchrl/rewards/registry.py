@@ -3,8 +3,11 @@
 Every reward, built-in or a researcher's own, is added with :func:`register_reward`, which records
 under its name a :class:`RegisteredReward`: the function, its kind (positional or directional),
 what its image head reads, the finetuning objective that trains its heads (a built-in loss, or
-one the reward brings) and the options of its own (hyperparameters with their defaults, set from
-a config's ``reward.options``). A new reward with a new hyperparameter is then one file.
+one the reward brings) and its options (hyperparameters with their defaults, set from a config's
+``reward.options``): those it declares, and those its layout or objective gives it
+(:data:`WINDOW_OPTIONS`, :data:`CERTAINTY_OPTIONS`), so d_sequence's window and d_certainty's
+certainty estimate are set the way a reward of one's own is. A new reward with a new
+hyperparameter is then one file.
 :data:`POSITIONAL`, :data:`DIRECTIONAL`, :data:`IMAGE_INPUTS` and :data:`OBJECTIVES` are read-only
 views of that one dict, so they cannot fall out of step with it.
 :func:`~temporal_torchrl.rewards.heads.heads_input_dims` and
@@ -17,14 +20,20 @@ registered name works everywhere a built-in does. The built-ins register themsel
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
 from torch import Tensor
 
-from temporal_torchrl.defaults import ALPHA, PROJECTION
+from temporal_torchrl.defaults import (
+    ALPHA,
+    CERTAINTY_BANDWIDTH,
+    CERTAINTY_PRIOR,
+    PROJECTION,
+    WINDOW_LENGTH,
+)
 
 #: A reward function; see :func:`register_reward` for the signature it must follow.
 RewardFunction = Callable[..., Tensor]
@@ -50,6 +59,27 @@ _SIGNATURE = (f"fn(heads, s, *, g, b, s0=None, s_prev=None, alpha={ALPHA}, posit
 
 #: The types an option's default may have (what a config's ``reward.options.<key>`` can hold).
 OPTION_TYPES = (bool, int, float, str, type(None))
+#: The option every reward registered with ``image_input="window"`` has (d_sequence's, a window
+#: reward of one's own alike): K, the number of embeddings s_(t-K+1) .. s_t it reads. It sizes
+#: the heads' sequence encoder and the windows the history transform and the replay buffer
+#: build; the function is not passed K, it receives the window itself as ``window``.
+WINDOW_OPTIONS = MappingProxyType({"window": WINDOW_LENGTH})
+#: The options every reward registered with ``objective="certainty"`` has (d_certainty's), read
+#: by its loss, and those ``TemporalReward(certainty_scaling=True)`` adds to the reward it
+#: scales: beta and c of the certainty estimate
+#: (:func:`~temporal_torchrl.rewards.certainty.direction_certainty`).
+CERTAINTY_OPTIONS = MappingProxyType({"certainty_bandwidth": CERTAINTY_BANDWIDTH,
+                                      "certainty_prior": CERTAINTY_PRIOR})
+# What the options above take beyond their default's type: a test and its words. A reward's own
+# options take any value of their default's type.
+_OPTION_RANGES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "window": (lambda value: value >= 2, "an integer >= 2 (K, the embeddings s_(t-K+1) .. s_t "
+               "a window reward reads)"),
+    "certainty_bandwidth": (lambda value: value > 0, "a number > 0 (beta, the certainty "
+                            "kernel's width in median distances)"),
+    "certainty_prior": (lambda value: value > 0, "a number > 0 (c, the certainty's "
+                        "pseudo-count)"),
+}
 
 
 @dataclass(frozen=True)
@@ -62,7 +92,9 @@ class RegisteredReward:
         image_input: what the image head reads (:data:`IMAGE_LAYOUTS`).
         objective: the finetuning objective of its heads: one of :data:`OBJECTIVES_BY_KIND`, or
             the name of the reward's own ``loss``.
-        options: the reward's own options by name, each with its default (read-only).
+        options: the reward's options by name, each with its default (read-only): those it
+            declared and those of its layout or objective (:data:`WINDOW_OPTIONS`,
+            :data:`CERTAINTY_OPTIONS`).
         loss: the reward's own finetuning loss (a
             :class:`~temporal_torchrl.objectives.FinetuningLoss` subclass), or None: the
             built-in loss of ``objective``.
@@ -74,6 +106,13 @@ class RegisteredReward:
     objective: str
     options: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     loss: type | None = None
+
+    def keyword_options(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """The options the function is called with, by name: each one's value in ``values``,
+        else its default. Not ``window`` (:data:`WINDOW_OPTIONS`): the function receives the
+        window of K embeddings itself under that keyword."""
+        return {key: values.get(key, default) for key, default in self.options.items()
+                if key not in WINDOW_OPTIONS}
 
 
 #: Every registered reward by name, in the order of registration.
@@ -162,8 +201,11 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
       goal, ``TemporalReward.directional_reward(..., straight_path=True)``): it reads that path
       as ``straight_window(s_prev, s, K)``, or scores it without building it, as d_sequence
       does.
-    - the reward's own ``options``, each by its name: the value a config's
-      ``reward.options.<name>`` (``TemporalReward(options=...)``) sets, else its default.
+    - the reward's ``options``, each by its name: the value a config's
+      ``reward.options.<name>`` (``TemporalReward(options=...)``) sets, else its default. Besides
+      those it declares, a reward registered with ``objective="certainty"`` has
+      :data:`CERTAINTY_OPTIONS`, and one with ``image_input="window"`` has ``window``
+      (:data:`WINDOW_OPTIONS`: K, which sizes its window; not passed as a keyword).
     - ``**unused``: callers pass every keyword above; a reward ignores those it does not need.
     - Returns the reward, shape ``s.shape[:-1]`` (differentiable in the heads' parameters for
       the finetuning losses).
@@ -186,7 +228,8 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
             an int, a float, a string or None. The function receives each as a keyword; a
             config sets one with ``+reward.options.<name>=<value>`` (of the default's type; an
             int where the default is a float), and the reward's loss reads them as
-            ``reward.options[name]``. A name must not be one of the keywords above.
+            ``reward.options[name]``. A name must not be one of the keywords above, nor one
+            of :data:`CERTAINTY_OPTIONS`, which the ``"certainty"`` objective gives.
         loss: the reward's own finetuning loss, a
             :class:`~temporal_torchrl.objectives.FinetuningLoss` subclass that trains this
             part's heads, constructed as ``loss(reward, goal_image_embedding, stage=stage,
@@ -257,7 +300,9 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
             raise ValueError(f"register_reward({name!r}): objective={objective!r}; a {kind} "
                              f"reward is trained with one of "
                              f"{', '.join(OBJECTIVES_BY_KIND[kind])}, or pass its own loss=.")
-    options = _checked_options(name, options)
+    options = {**_checked_options(name, options),
+               **(WINDOW_OPTIONS if image_input == "window" else {}),
+               **(CERTAINTY_OPTIONS if objective == "certainty" else {})}
     if objective == "certainty" and image_input not in ("embedding", "concatenated"):
         raise ValueError(f"register_reward({name!r}): objective='certainty' needs a reward of "
                          "one direction s - s_prev (image_input 'embedding' or "
@@ -272,7 +317,8 @@ def register_reward(name: str, function: RewardFunction, *, kind: str,
                          "it.")
     # An overwritten name moves to the end, as a new registration would stand.
     REWARDS.pop(name, None)
-    REWARDS[name] = RegisteredReward(function, kind, image_input, objective, options, loss)
+    REWARDS[name] = RegisteredReward(function, kind, image_input, objective,
+                                     MappingProxyType(options), loss)
 
 
 def unregister_reward(name: str) -> None:
@@ -322,22 +368,47 @@ def objective_of(name: str) -> str:
     return registered(name).objective
 
 
+def declared_options(parts: Sequence[str], certainty_scaling: bool = False
+                     ) -> dict[str, tuple[str, Any]]:
+    """Every option a reward of these ``parts`` (registered names) has, ``{key: (whose,
+    default)}``: each part's, and with ``certainty_scaling`` :data:`CERTAINTY_OPTIONS`, which
+    the scaling's certainty estimate reads (``whose``: ``"certainty_scaling"``). The one list a
+    config's ``reward.options`` and ``TemporalReward(options=...)`` are checked against."""
+    declared = {key: (name, default) for name in parts
+                for key, default in registered(name).options.items()}
+    if certainty_scaling:
+        declared = {**{key: ("certainty_scaling", default)
+                       for key, default in CERTAINTY_OPTIONS.items()}, **declared}
+    return declared
+
+
+def option_expected(name: str, key: str, default: Any) -> str:
+    """What the option ``key`` of the reward ``name`` takes, in words: its range for the
+    options of :data:`WINDOW_OPTIONS` and :data:`CERTAINTY_OPTIONS`, else a value of the type of
+    its ``default`` (not None: an option of default None takes any value)."""
+    if key in _OPTION_RANGES:
+        return _OPTION_RANGES[key][1]
+    return f"a {type(default).__name__} like {name}'s default {default!r}"
+
+
 def option_value(name: str, key: str, value: Any, default: Any) -> Any:
     """``value`` for the option ``key`` of the reward ``name``, checked against its
-    ``default``'s type (an int is taken where the default is a float, as a float).
+    ``default``'s type (an int is taken where the default is a float, as a float) and, for the
+    options of :data:`WINDOW_OPTIONS` and :data:`CERTAINTY_OPTIONS`, their range.
 
     Raises:
-        ValueError: for a value of another type.
+        ValueError: for a value of another type or out of range, saying what is expected.
     """
     if default is None:  # any config value
         return value
-    if isinstance(default, float) and isinstance(value, int | float) \
-            and not isinstance(value, bool):
-        return float(value)
-    expected = type(default)
-    if type(value) is not expected:
-        raise ValueError(f"option {key}={value!r} of reward {name!r}; expected a "
-                         f"{expected.__name__} like its default {default!r}.")
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if isinstance(default, float) and number:
+        value = float(value)
+    admitted = type(value) is type(default) and (
+        key not in _OPTION_RANGES or _OPTION_RANGES[key][0](value))
+    if not admitted:
+        raise ValueError(f"option {key}={value!r} of reward {name!r}; expected "
+                         f"{option_expected(name, key, default)}.")
     return value
 
 
@@ -355,6 +426,10 @@ def _checked_options(name: str, options: Mapping[str, Any] | None) -> Mapping[st
             raise ValueError(f"register_reward({name!r}): option {key!r} is one of the keywords "
                              f"every reward is called with ({', '.join(_CALL_KEYWORDS)}); "
                              "choose another name.")
+        if key in CERTAINTY_OPTIONS:
+            raise ValueError(f"register_reward({name!r}): option {key!r} is the certainty "
+                             "estimate's, which objective='certainty' and certainty_scaling "
+                             "give a reward; choose another name.")
         if not isinstance(default, OPTION_TYPES):
             raise ValueError(f"register_reward({name!r}): option {key}={default!r}; a default "
                              "is a bool, an int, a float, a string or None (a config value).")
@@ -367,8 +442,9 @@ def _check_signature(name: str, function: RewardFunction,
         signature = inspect.signature(function)
     except (TypeError, ValueError):  # Some builtins and extension functions have none.
         return
+    keywords = {key: value for key, value in options.items() if key not in WINDOW_OPTIONS}
     try:
-        signature.bind(None, None, **_CALL_KEYWORDS, **options)
+        signature.bind(None, None, **_CALL_KEYWORDS, **keywords)
     except TypeError as error:
         raise ValueError(
             f"register_reward({name!r}): {getattr(function, '__name__', function)!r} cannot be "

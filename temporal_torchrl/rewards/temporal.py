@@ -15,6 +15,7 @@ from temporal_torchrl.rewards.registry import (
     DIRECTIONAL,
     POSITIONAL,
     REWARDS,
+    declared_options,
     option_value,
     registered,
 )
@@ -78,33 +79,35 @@ class TemporalReward(nn.Module):
         alpha: goal-baseline regularisation strength in [0, 1] (P3, P4, D5).
         projection: ``"origin"`` (the thesis's release) or ``"line"`` (VLM-RMs); see
             :mod:`temporal_torchrl.rewards.positional`.
-        window_length: K, the number of embeddings s_{t-K+1} .. s_t a ``"window"`` reward
-            (d_sequence) reads (>= 2). Like ``k``, configuration for the history transform and
-            the replay buffer, which produce the window; unused by other rewards.
-        certainty_bandwidth, certainty_prior: beta and c of the certainty estimate
-            (:func:`~temporal_torchrl.rewards.certainty.direction_certainty`), read by the
-            certainty loss (d_certainty) and by ``certainty_scaling``.
         certainty_scaling: the multiplicative option of the thesis's section 6.4 proposal
             (beyond the thesis): the directional reward that :meth:`forward` returns is
             ``|t(s_t, Δs_t)|`` r_D, with t from the references of the last finetuning batch
             (:attr:`certainty`). :meth:`directional_reward`, which the finetuning losses call,
             stays unscaled: the heads are trained as they are (the "step function"), the
-            factor only shapes the reward the agent sees.
-        options: values of the parts' own options (declared with
-            :func:`~temporal_torchrl.rewards.register_reward`'s ``options``), by name; an option
-            not given takes its registered default. An option both parts declare goes to both.
+            factor only shapes the reward the agent sees. Its certainty estimate's beta and c
+            are options (:data:`~temporal_torchrl.rewards.registry.CERTAINTY_OPTIONS`).
+        options: values of the parts' options, by name (``{"window": 4}``); an option not
+            given takes its registered default. A part's options are those
+            :func:`~temporal_torchrl.rewards.register_reward` declared and those of its layout
+            or objective: ``window``, K, the number of embeddings s_{t-K+1} .. s_t a
+            ``"window"`` reward (d_sequence) reads, and ``certainty_bandwidth`` and
+            ``certainty_prior``, beta and c of the certainty estimate
+            (:func:`~temporal_torchrl.rewards.certainty.direction_certainty`) of the
+            ``"certainty"`` objective (d_certainty) and of ``certainty_scaling``. An option
+            both parts declare goes to both.
 
     Attributes:
         positional_heads: the trainable :class:`RewardHeads` f^P, or None when that part is
             absent or zero-shot (registered with ``image_input=None``, like ``"liv"``).
         directional_heads: the trainable :class:`RewardHeads` f^D, or None likewise.
-        window_length: K when a part reads the window (registered with ``image_input="window"``),
-            else None: the history transform and the replay buffer need no window.
+        window_length: K (``options["window"]``) when a part reads the window (registered
+            with ``image_input="window"``), else None: the history transform and the replay
+            buffer need no window. Like ``k``, configuration for them: they produce the window.
         certainty: the :class:`~temporal_torchrl.rewards.certainty.CertaintyMemory` of
             ``certainty_scaling`` (None without it).
-        options: every option of the parts, by name: the value given, else the registered
-            default (empty for the built-in rewards, which declare none). A part's loss reads
-            its hyperparameters here.
+        options: every option of the parts (and of ``certainty_scaling``), by name: the value
+            given, else the registered default (empty for the rewards of the thesis, which have
+            none). A part's loss reads its hyperparameters here.
 
     Example:
         >>> import torch
@@ -123,9 +126,6 @@ class TemporalReward(nn.Module):
                  rho: float = defaults.RHO, lambda_: float = defaults.LAMBDA,
                  k: int = defaults.HISTORY, alpha: float = defaults.ALPHA,
                  projection: str = defaults.PROJECTION,
-                 window_length: int = defaults.WINDOW_LENGTH,
-                 certainty_bandwidth: float = defaults.CERTAINTY_BANDWIDTH,
-                 certainty_prior: float = defaults.CERTAINTY_PRIOR,
                  certainty_scaling: bool = False,
                  options: Mapping[str, Any] | None = None):
         super().__init__()
@@ -153,10 +153,6 @@ class TemporalReward(nn.Module):
         if projection not in defaults.PROJECTIONS:
             raise ValueError(f"projection={projection!r}; expected one of "
                              f"{', '.join(defaults.PROJECTIONS)}.")
-        check_window_length(window_length)
-        if not certainty_bandwidth > 0 or not certainty_prior > 0:
-            raise ValueError(f"certainty_bandwidth={certainty_bandwidth!r}, certainty_prior="
-                             f"{certainty_prior!r}; expected both > 0.")
         if certainty_scaling and directional is None:
             raise ValueError("certainty_scaling=True scales the directional reward; set "
                              "directional too.")
@@ -168,25 +164,24 @@ class TemporalReward(nn.Module):
         self.k = k
         self.alpha = float(alpha)
         self.projection = projection
+        self.options = self._options(options or {}, certainty_scaling)
         # Only directional rewards read a window (register_reward enforces it).
         reads_window = directional is not None and REWARDS[directional].image_input == "window"
-        self.window_length = window_length if reads_window else None
-        self.certainty_bandwidth = float(certainty_bandwidth)
-        self.certainty_prior = float(certainty_prior)
-        self.certainty = (CertaintyMemory(embedding_dim, certainty_bandwidth, certainty_prior)
+        self.window_length = self.options["window"] if reads_window else None
+        self.certainty = (CertaintyMemory(embedding_dim, self.options["certainty_bandwidth"],
+                                          self.options["certainty_prior"])
                           if certainty_scaling else None)
-        self.options = self._options(options or {})
         self.register_buffer("goal_embedding", self._text_embedding(goal_embedding, "goal"))
         self.register_buffer("baseline_embedding",
                              self._text_embedding(baseline_embedding, "baseline"))
         self.positional_heads = self._heads(positional)
         self.directional_heads = self._heads(directional)
 
-    def _options(self, given: Mapping[str, Any]) -> dict[str, Any]:
-        """The parts' options, ``given`` values checked against the registered defaults."""
+    def _options(self, given: Mapping[str, Any], certainty_scaling: bool) -> dict[str, Any]:
+        """The parts' options (and ``certainty_scaling``'s), ``given`` values checked against
+        the registered defaults."""
         parts = [name for name in (self.positional, self.directional) if name is not None]
-        declared = {key: (name, default) for name in parts
-                    for key, default in REWARDS[name].options.items()}
+        declared = declared_options(parts, certainty_scaling)
         unknown = sorted(set(given) - set(declared))
         if unknown:
             known = ", ".join(declared) or "none"
@@ -198,9 +193,9 @@ class TemporalReward(nn.Module):
 
     def part_options(self, variant: str) -> dict[str, Any]:
         """The keyword arguments of ``variant``'s options in a call of its function: this
-        reward's values of them (``options``), else their registered defaults."""
-        return {key: self.options.get(key, default)
-                for key, default in REWARDS[variant].options.items()}
+        reward's values of them (``options``), else their registered defaults (not
+        ``window``: see :meth:`~temporal_torchrl.rewards.RegisteredReward.keyword_options`)."""
+        return REWARDS[variant].keyword_options(self.options)
 
     def _heads(self, variant: str | None) -> RewardHeads | None:
         """Heads sized by the variant's registered image input; None if absent or zero-shot."""
@@ -324,10 +319,9 @@ class TemporalReward(nn.Module):
                 "reward": task + self.rho * vlm}
 
     def extra_repr(self) -> str:
-        window = "" if self.window_length is None else f", window_length={self.window_length}"
         scaling = "" if self.certainty is None else ", certainty_scaling=True"
         options = f", options={self.options!r}" if self.options else ""
         return (f"embedding_dim={self.embedding_dim}, positional={self.positional!r}, "
                 f"directional={self.directional!r}, rho={self.rho}, lambda_={self.lambda_}, "
-                f"k={self.k}, alpha={self.alpha}, projection={self.projection!r}{window}"
-                f"{scaling}{options}")
+                f"k={self.k}, alpha={self.alpha}, projection={self.projection!r}{scaling}"
+                f"{options}")

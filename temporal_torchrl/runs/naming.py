@@ -11,7 +11,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from temporal_torchrl import defaults
-from temporal_torchrl.rewards.config import uses_vlm_reward
+from temporal_torchrl.rewards.config import moved_options, uses_vlm_reward
 from temporal_torchrl.runs.layout import protocol_name
 
 #: What a default run directory's name tells runs apart by (:func:`default_run_dir`).
@@ -24,16 +24,20 @@ def default_run_dir(cfg: DictConfig) -> Path:
     lambda, baseline, preloaded experts), in a reward option or in the seed never share a
     directory (with ``reward.certainty_scaling`` the directional part reads
     ``<directional>xcertainty``; with ``reward.options`` the baseline is followed by
-    ``_opt<digest>``, :func:`options_digest`; with ``env.goal=random`` the protocol part ends in
-    ``_randomgoal``). Each suffix appears only when its setting is on, so the names of runs
-    without it, older ones included, stay as they were and those runs still resume."""
+    ``_opt<digest>``, :func:`options_digest`, of the options set, not of their defaults, so a
+    run of d_sequence's or d_certainty's default options keeps the name it had before they
+    became options (their deprecated keys, null or at their old default, set none); with
+    ``env.goal=random`` the protocol part ends in ``_randomgoal``). Each suffix appears only
+    when its setting is on, so the names of runs without it, older ones included, stay as they
+    were and those runs still resume."""
     if uses_vlm_reward(cfg):
         baseline = cfg.reward.baseline
         if baseline not in ("generic", "tailored"):
             baseline = re.sub(r"[^A-Za-z0-9]+", "-", baseline).strip("-")[:40] or "text"
         scaled = "xcertainty" if cfg.reward.certainty_scaling else ""
-        options = OmegaConf.select(cfg, "reward.options", default=None)
-        options = OmegaConf.to_container(options, resolve=True) if options else {}
+        # The options as validation stores them (reward.window=12 is reward.options.window=12),
+        # so a sweep job's directory is the same before its config is validated and after.
+        options = moved_options(OmegaConf.to_container(cfg.reward, resolve=True))
         tagged = f"_opt{options_digest(options)}" if options else ""
         method = (f"{cfg.encoder.name}_{cfg.reward.positional}+{cfg.reward.directional}{scaled}"
                   f"_rho{cfg.reward.rho:g}_lambda{cfg.reward.lambda_:g}_{baseline}{tagged}")

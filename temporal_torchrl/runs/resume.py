@@ -14,7 +14,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from temporal_torchrl import defaults
-from temporal_torchrl.rewards.config import uses_vlm_reward
+from temporal_torchrl.rewards.config import DEPRECATED_KEYS, uses_vlm_reward, with_moved_options
 from temporal_torchrl.runs.directory import RunDirectory
 from temporal_torchrl.runs.layout import CONFIG_FILE, SUMMARY_FILE, flatten
 from temporal_torchrl.runs.naming import NAMED_BY, run_directory
@@ -128,9 +128,14 @@ def conflicting_values(cfg: DictConfig, other: dict[str, Any],
                        given_keys: Collection[str]) -> dict[str, tuple[Any, Any]]:
     """The keys of ``given_keys`` whose values in ``cfg`` differ from those in the config
     ``other``, except the keys one run may change between its processes (process, resumable,
-    device and logger keys): ``{key: (cfg's value, other's value)}``."""
-    ours = flatten(OmegaConf.to_container(cfg, resolve=True))
-    theirs = flatten(other)
+    device and logger keys): ``{key: (cfg's value, other's value)}``. Both are compared as
+    validation spells them (:func:`~temporal_torchrl.rewards.config.with_moved_options`), so a
+    run saved with ``reward.window: 8`` is not another config's, and a deprecated key given
+    (``reward.window``) is compared as the option it sets."""
+    ours = flatten(with_moved_options(OmegaConf.to_container(cfg, resolve=True)))
+    theirs = flatten(with_moved_options(other))
+    given_keys = {*given_keys, *(f"reward.options.{key}" for key in DEPRECATED_KEYS
+                                 if f"reward.{key}" in given_keys)}
     return {key: (value, theirs[key]) for key, value in ours.items()
             if key in theirs and theirs[key] != value and _is_given(key, given_keys)
             and key not in (*PROCESS_KEYS, *RESUMABLE_KEYS, *DEVICE_KEYS)
@@ -159,8 +164,9 @@ def resumed_config(cfg: DictConfig, run_dir: Path,
                                if given_keys is None or key in given_keys)]
     for key in applied:
         OmegaConf.update(saved, key, OmegaConf.select(cfg, key), force_add=True)
-    saved_values = flatten(OmegaConf.to_container(saved, resolve=True))
-    differing = [key for key, value in flatten(OmegaConf.to_container(cfg, resolve=True)).items()
+    saved_values = flatten(with_moved_options(OmegaConf.to_container(saved, resolve=True)))
+    current_values = flatten(with_moved_options(OmegaConf.to_container(cfg, resolve=True)))
+    differing = [key for key, value in current_values.items()
                  if key not in applied and saved_values.get(key, value) != value]
     if differing:
         print(f"resume: continuing with {run_dir / CONFIG_FILE}; not using the current "

@@ -47,6 +47,7 @@ from temporal_torchrl.reward_quality import (
     task_config,
 )
 from temporal_torchrl.rewards import TemporalReward, single_part
+from temporal_torchrl.rewards.registry import declared_options
 from temporal_torchrl.training import factories
 
 #: The recipes' config folder, whose ``evaluate_rewards.yaml`` the study composes.
@@ -99,11 +100,12 @@ def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
     shapes = {}
     for label, variant, scaling in CONFIGURATIONS:
         torch.manual_seed(cfg.env.seed)
+        # The certainty options (reward.options) of those that read them.
+        declared = declared_options([variant], scaling)
         reward = TemporalReward(encoder.dim, texts[0], texts[1], **single_part(variant),
-                                k=cfg.reward.k,
-                                certainty_bandwidth=cfg.reward.certainty_bandwidth,
-                                certainty_prior=cfg.reward.certainty_prior,
-                                certainty_scaling=scaling)
+                                k=cfg.reward.k, certainty_scaling=scaling,
+                                options={key: value for key, value in cfg.reward.options.items()
+                                         if key in declared})
         finetune_reward(reward, buffer, goal_image, updates=cfg.finetune.updates,
                         batch_size=cfg.reward.batch_size, lr=cfg.reward.lr)
         shapes[label] = shape(reward, successful, failed)

@@ -41,7 +41,7 @@ from temporal_torchrl.reward_quality import (
     score_reward,
     task_config,
 )
-from temporal_torchrl.rewards import TemporalReward, single_part
+from temporal_torchrl.rewards import REWARDS, TemporalReward, single_part
 from temporal_torchrl.training import factories
 
 #: The recipes' config folder, whose ``evaluate_rewards.yaml`` the study composes.
@@ -74,7 +74,7 @@ class TemporalConvolution(nn.Module):
 def sequence_reward(encoder: str, dim: int, goal: Tensor, baseline: Tensor,
                     window_length: int) -> TemporalReward:
     reward = TemporalReward(dim, goal, baseline, **single_part("d_sequence"),
-                            window_length=window_length)
+                            options={"window": window_length})
     if encoder == "convolution":
         reward.directional_heads.image = TemporalConvolution(2 * dim, window_length - 1)
     return reward
@@ -102,6 +102,11 @@ def update_milliseconds(reward: TemporalReward, dim: int, window_length: int,
     return 1000 * statistics.median(times[3:])
 
 
+def configured_window(cfg) -> int:
+    """K: the config's ``reward.options.window``, else d_sequence's default."""
+    return cfg.reward.options.get("window", REWARDS["d_sequence"].options["window"])
+
+
 def task_scores(cfg, encoder) -> dict[str, tuple[float, float]]:
     """(direction accuracy, AUROC) of each image head after finetuning, on one task."""
     data = prepare_task(cfg, encoder)
@@ -109,11 +114,11 @@ def task_scores(cfg, encoder) -> dict[str, tuple[float, float]]:
     goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
                                     history=cfg.reward.k, label_window=cfg.reward.label_window,
-                                    window_length=cfg.reward.window, gap=cfg.reward.gap)
+                                    window_length=configured_window(cfg), gap=cfg.reward.gap)
     scores = {}
     for name in ENCODERS:
         torch.manual_seed(cfg.env.seed)
-        reward = sequence_reward(name, encoder.dim, texts[0], texts[1], cfg.reward.window)
+        reward = sequence_reward(name, encoder.dim, texts[0], texts[1], configured_window(cfg))
         finetune_reward(reward, buffer, goal_image, updates=cfg.finetune.updates,
                         batch_size=cfg.reward.batch_size, lr=cfg.reward.lr)
         result = score_reward(reward, successful, failed)
@@ -129,7 +134,7 @@ def main(overrides: list[str]) -> None:
         cfg = compose("evaluate_rewards", overrides=overrides)
     cfg = validate_reward_quality_config(cfg)
     start = time.perf_counter()
-    length = cfg.reward.window
+    length = configured_window(cfg)
     lines = ["# d_sequence: Transformer or temporal convolution", "",
              f"K = {length} (K - 1 = {length - 1} tokens of 2D). Image-head parameters and the "
              "time of one head update (directional loss on 256 negative + 256 positive "

@@ -16,6 +16,7 @@ from temporal_torchrl.rewards import (
     direction_certainty,
     reference_scales,
 )
+from temporal_torchrl.rewards.registry import CERTAINTY_OPTIONS
 
 #: The groups of the batch that carry a label: -1 for negatives, +1 for positives.
 LABELLED_GROUPS = ("negative", "positive")
@@ -43,8 +44,10 @@ class CertaintyLoss(FinetuningLoss):
     (towards-goal and opposite directions mostly are). The observed directions are their own
     references, so each leaves itself out (a state is not its own evidence).
 
-    Beta and c come from the reward (``reward.certainty_bandwidth``, ``certainty_prior``); the
-    loss owns no state besides s_g, which the recipe saves.
+    Beta and c are the reward's options ``certainty_bandwidth`` and ``certainty_prior``
+    (``reward.options``; every reward registered with ``objective="certainty"`` has them,
+    :data:`~temporal_torchrl.rewards.registry.CERTAINTY_OPTIONS`); the loss owns no state
+    besides s_g, which the recipe saves.
 
     Args:
         reward: the :class:`TemporalReward` whose directional heads are trained; its reward must
@@ -64,6 +67,11 @@ class CertaintyLoss(FinetuningLoss):
         if reward.window_length is not None:
             raise ValueError(f"reward.directional={reward.directional!r} reads a window; the "
                              "certainty target is defined for one direction s_t - s_(t-k).")
+        if not set(CERTAINTY_OPTIONS) <= set(reward.options):
+            raise ValueError(f"reward.directional={reward.directional!r} has no "
+                             f"{' or '.join(CERTAINTY_OPTIONS)} option: the certainty loss "
+                             "trains a reward registered with objective='certainty', such as "
+                             "d_certainty.")
         super().__init__(reward, reward.directional_heads, goal_image_embedding, stage=stage)
 
     def terms(self, tensordict: TensorDictBase) -> dict[str, Tensor]:
@@ -80,8 +88,9 @@ class CertaintyLoss(FinetuningLoss):
         def certainty(position: Tensor, direction: Tensor, exclude: Tensor | None = None
                       ) -> Tensor:
             return direction_certainty(position, direction, positions, directions, labels,
-                                       bandwidth=self.reward.certainty_bandwidth,
-                                       prior=self.reward.certainty_prior, scales=scales,
+                                       bandwidth=self.reward.options["certainty_bandwidth"],
+                                       prior=self.reward.options["certainty_prior"],
+                                       scales=scales,
                                        exclude=exclude)
 
         leave_one_out = torch.eye(labels.numel(), dtype=torch.bool, device=labels.device)
