@@ -982,3 +982,19 @@ def test_a_config_with_the_deprecated_reward_keys_means_their_options():
                                          r"window=10 disagree: reward\.window is the deprecated "
                                          r"spelling of reward\.options\.window"):
         reward_options(config)
+
+
+def test_the_old_hyperparameter_keywords_still_work_for_a_release():
+    D = 8
+    goal, baseline = torch.randn(D), torch.randn(D)
+    with pytest.warns(FutureWarning, match=r"TemporalReward\(window_length=\.\.\.\) is deprecated"
+                                           r".*pass options=\{'window': 6\}"):
+        reward = TemporalReward(D, goal, baseline, directional="d_sequence", window_length=6)
+    assert reward.window_length == 6
+    assert reward.options["window"] == TemporalReward(
+        D, goal, baseline, directional="d_sequence", options={"window": 6}).options["window"]
+    with pytest.raises(TypeError, match="unexpected keyword"):
+        TemporalReward(D, goal, baseline, windw=3)
+    with pytest.raises(ValueError, match="disagree"), pytest.warns(FutureWarning):
+        TemporalReward(D, goal, baseline, directional="d_sequence", window_length=6,
+                       options={"window": 4})

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -127,8 +128,9 @@ class TemporalReward(nn.Module):
                  k: int = defaults.HISTORY, alpha: float = defaults.ALPHA,
                  projection: str = defaults.PROJECTION,
                  certainty_scaling: bool = False,
-                 options: Mapping[str, Any] | None = None):
+                 options: Mapping[str, Any] | None = None, **moved: Any):
         super().__init__()
+        options = _with_moved_keywords(options, moved)
         if isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) \
                 or embedding_dim < 1:
             raise ValueError(f"embedding_dim={embedding_dim!r}; expected a positive integer.")
@@ -325,3 +327,32 @@ class TemporalReward(nn.Module):
                 f"directional={self.directional!r}, rho={self.rho}, lambda_={self.lambda_}, "
                 f"k={self.k}, alpha={self.alpha}, projection={self.projection!r}{scaling}"
                 f"{options}")
+
+
+#: Keywords TemporalReward took before its rewards' hyperparameters became registry options, and
+#: the option each became (kept for one release, with a FutureWarning).
+MOVED_KEYWORDS = {"window_length": "window", "certainty_bandwidth": "certainty_bandwidth",
+                  "certainty_prior": "certainty_prior"}
+
+
+def _with_moved_keywords(options: Mapping[str, Any] | None,
+                         moved: Mapping[str, Any]) -> Mapping[str, Any] | None:
+    """``options`` with the old keywords in ``moved`` (:data:`MOVED_KEYWORDS`) moved in, each
+    with a FutureWarning naming its new spelling; any other keyword is a TypeError."""
+    unknown = set(moved) - set(MOVED_KEYWORDS)
+    if unknown:
+        raise TypeError(f"TemporalReward() got unexpected keyword(s) {', '.join(sorted(unknown))}"
+                        f"; a reward's own hyperparameters go in options={{name: value}}.")
+    if not moved:
+        return options
+    merged = dict(options or {})
+    for keyword, value in moved.items():
+        option = MOVED_KEYWORDS[keyword]
+        warnings.warn(f"TemporalReward({keyword}=...) is deprecated and will be removed in the "
+                      f"next release; pass options={{{option!r}: {value!r}}}.", FutureWarning,
+                      stacklevel=3)
+        if option in merged and merged[option] != value:
+            raise ValueError(f"TemporalReward: {keyword}={value!r} and options[{option!r}]="
+                             f"{merged[option]!r} disagree; pass options[{option!r}] only.")
+        merged[option] = value
+    return merged
