@@ -98,7 +98,7 @@ def evaluate_task(cfg: DictConfig, encoder: Encoder, command: str) -> dict:
             if state == "finetuned":
                 if reward.window_length not in buffers:
                     buffers[reward.window_length] = make_finetuning_buffer(
-                        train.episodes, stage=cfg.finetune.stage, history=cfg.reward.k,
+                        train.episodes, stage=cfg.finetune.stage, k=cfg.reward.k,
                         label_window=cfg.reward.label_window, window_length=reward.window_length,
                         gap=cfg.reward.gap)
                 final_losses = finetune_reward(

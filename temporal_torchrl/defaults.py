@@ -28,7 +28,7 @@ RHO = 1.0
 #: lambda, the weight of the directional reward relative to the positional one (thesis 4.1).
 LAMBDA = 4.0
 #: k, the history offset of s_{t-k} in the direction s_t - s_{t-k} (thesis 4.3).
-HISTORY = 5
+K = 5
 #: alpha, the goal-baseline regularisation strength of P3, P4 and D5 (thesis 3.1.2, eq. 4.5).
 ALPHA = 0.4
 #: The goal-baseline projection forms: onto the direction g - b from the origin (the thesis's
@@ -37,8 +37,9 @@ ALPHA = 0.4
 PROJECTIONS = ("origin", "line")
 #: The goal-baseline projection (``"origin"``, the thesis's release).
 PROJECTION = "origin"
-#: K, the embeddings s_{t-K+1} .. s_t a window reward (d_sequence) reads (beyond the thesis,
-#: section 6.3 proposal).
+#: The window length K, the embeddings s_{t-K+1} .. s_t a window reward (d_sequence) reads
+#: (beyond the thesis, section 6.3 proposal); the registry option ``window``
+#: (``reward.options.window``), ``window_length`` in Python.
 WINDOW_LENGTH = 8
 #: beta and c of the certainty estimate (beyond the thesis, section 6.4 proposal): the kernel
 #: bandwidth in units of the references' median distances, and the pseudo-count of "unsure".
@@ -50,8 +51,8 @@ CERTAINTY_BANDWIDTH = 0.1
 CERTAINTY_PRIOR = 1.0
 #: delta, the margin of FuRL's ranking loss l_delta (thesis 3.1.3).
 DELTA = 0.1
-#: How much closer to the goal image s_g a negative must be to be preferred in the stage-1
-#: ranking loss (the thesis's release).
+#: How much closer to the goal image s_g a negative must be to be preferred in the finetuning
+#: stage-1 ranking loss (the thesis's release).
 L2_MARGIN = 0.2
 #: The directional loss's contrasted terms at the variant's own position (the thesis text, 4.3.3);
 #: False: the release's plain position for D4 and D5.
@@ -60,7 +61,8 @@ SAME_POSITION = True
 HEADS_BATCH_SIZE = 256
 #: The heads' Adam learning rate (the thesis release, LukasWill/directional_vlm_rl).
 HEADS_LEARNING_RATE = 1e-4
-#: The finetuning's stages (thesis 3.1.3): 1 from failed episodes only, 2 with successful ones.
+#: The finetuning stages (thesis 3.1.3): 1 from failed episodes only, 2 with successful ones
+#: (not the protocol stages of section 5.1, ``protocol=stage1|stage2``).
 STAGES = (1, 2)
 #: The finetuning samples its positive and negative states from the most recent this many of
 #: each kind (FuRL's FIFO of 20,000; the thesis release).
@@ -93,7 +95,7 @@ FAST_RENDER = True
 #: The side of the recipes' rendered frames (the package's small encoder reads 64x64). The
 #: library's render signatures default to 224, CLIP's input size, for an encoder-agnostic call.
 IMAGE_SIZE = 64
-#: Preloaded positive episodes of the thesis's second stage (section 5.1).
+#: Preloaded positive episodes of the thesis's protocol stage 2 (section 5.1).
 STAGE2_POSITIVES = 50
 #: The scripted experts' action noise (the stage-2 preloaded positives').
 EXPERT_NOISE = 0.1

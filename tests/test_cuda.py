@@ -164,7 +164,7 @@ def finetuning_losses_on(device: str, tmp_path: Path, stage: int, directional: s
     reward = make_temporal_reward("drawer-open", load_encoder("state", dim=dim), k=2,
                                   positional="furl", directional=directional,
                                   options={"window": 4} if directional == "d_sequence" else {})
-    buffer = EpisodeReplayBuffer(capacity=200, history=2, window_length=reward.window_length,
+    buffer = EpisodeReplayBuffer(capacity=200, k=2, window_length=reward.window_length,
                                  gap=5)
     buffer.extend(episode_rows(make_episode(0, 20, dim=dim), embedding_dtype=torch.float32))
     buffer.extend(episode_rows(make_episode(1, 20, successes=(12,) if stage == 2 else (),

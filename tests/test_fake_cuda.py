@@ -35,7 +35,7 @@ CUDA = torch.device("cuda", 0)  # with its index: tensordict asks the driver for
 
 def _filled_buffer() -> tuple[TemporalReward, EpisodeReplayBuffer]:
     reward = TemporalReward(D, torch.randn(D), torch.randn(D), directional="d3", k=2)
-    buffer = EpisodeReplayBuffer(capacity=200, history=2, batch_size=16,
+    buffer = EpisodeReplayBuffer(capacity=200, k=2, batch_size=16,
                                  finetuning_batch_size=16, permanent_episodes=1)
     insert(buffer, 0, 12, successes=(10, 11))
     for episode in range(1, 5):

@@ -127,7 +127,7 @@ def test_finetuning_batches_never_hold_the_reset_frame():
     positive nor a negative, and the directional loss never sees its zero direction."""
     from helpers import make_episode
 
-    buffer = EpisodeReplayBuffer(capacity=300, history=2)
+    buffer = EpisodeReplayBuffer(capacity=300, k=2)
     buffer.extend(episode_rows(make_episode(0, 20)))
     buffer.extend(episode_rows(make_episode(1, 20, successes=(15,))))
     batch = buffer.finetuning.sample(500)
@@ -146,7 +146,7 @@ def test_joining_the_finetuning_groups_copies_nothing():
 
     from temporal_torchrl.objectives.finetuning.base import joined as _joined
 
-    buffer = EpisodeReplayBuffer(capacity=300, history=2)
+    buffer = EpisodeReplayBuffer(capacity=300, k=2)
     buffer.extend(episode_rows(make_episode(0, 20)))
     buffer.extend(episode_rows(make_episode(1, 20, successes=(15,))))
     batch = buffer.finetuning.sample(8)
@@ -194,7 +194,7 @@ def test_directional_release_option_scores_contrast_at_plain_position():
 def test_stage_switch_follows_the_first_positive_episode():
     from helpers import make_episode
 
-    buffer = EpisodeReplayBuffer(capacity=300, history=2)
+    buffer = EpisodeReplayBuffer(capacity=300, k=2)
     reward = TemporalReward(4, torch.randn(4), torch.randn(4), positional="furl",
                             directional="d3")
     positional = PositionalRankingLoss(reward, torch.randn(4), stage=1)

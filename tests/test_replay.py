@@ -20,12 +20,12 @@ from temporal_torchrl.encoders import load_encoder
 def all_transitions(buffer: EpisodeReplayBuffer) -> TensorDict:
     """Every sampleable transition, through the buffer's own index arithmetic and transform."""
     rows = buffer.writer.rows()
-    return buffer[transition_index(rows["transitions"], rows["steps"], buffer.history,
+    return buffer[transition_index(rows["transitions"], rows["steps"], buffer.k,
                                    buffer.window_length)]
 
 
 def check_histories(buffer: EpisodeReplayBuffer, batch: TensorDict) -> None:
-    k = buffer.history
+    k = buffer.k
     step, episode = batch["step"], batch["episode"]
     base = 100.0 * episode
     nxt = batch["next"]
@@ -38,7 +38,7 @@ def check_histories(buffer: EpisodeReplayBuffer, batch: TensorDict) -> None:
 
 
 def test_every_transition_with_histories_never_crossing_episodes():
-    buffer = EpisodeReplayBuffer(capacity=200, history=3)
+    buffer = EpisodeReplayBuffer(capacity=200, k=3)
     for episode, steps in enumerate((7, 2, 12)):
         insert(buffer, episode, steps)
     assert buffer.num_transitions == 7 + 2 + 12
@@ -64,7 +64,7 @@ def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
     overwritten), episode 1 sits at rows 12..22 after stale rows of episode 0, so a window
     reaching past a start would read another episode's marker (or the storage's last row)."""
     length = 4
-    buffer = EpisodeReplayBuffer(capacity=24, history=2, window_length=length)
+    buffer = EpisodeReplayBuffer(capacity=24, k=2, window_length=length)
     for episode, steps in enumerate((11, 10, 9)):  # the third wraps to row 0
         insert(buffer, episode, steps)
     assert buffer.num_episodes == 2
@@ -85,7 +85,7 @@ def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
     assert torch.equal(negatives["embedding_window"][:, -1], negatives["embedding"])
     # Stage 2: the labelled states carry their windows; the pair's states, which only the
     # positional ranking loss reads, carry none (their windows are never converted).
-    staged = EpisodeReplayBuffer(capacity=60, history=2, window_length=length, gap=3)
+    staged = EpisodeReplayBuffer(capacity=60, k=2, window_length=length, gap=3)
     insert(staged, 0, 10)
     insert(staged, 1, 20, successes=(12, 13))
     batch = staged.finetuning.sample(64)
@@ -97,7 +97,7 @@ def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
     for state in ("later", "earlier"):
         assert "embedding_window" not in batch["positive_pair", state].keys()
         assert "embedding" in batch["positive_pair", state].keys()
-    plain = EpisodeReplayBuffer(capacity=24, history=2)
+    plain = EpisodeReplayBuffer(capacity=24, k=2)
     insert(plain, 0, 5)
     assert "embedding_window" not in plain.sample(4)["next"].keys()
     with pytest.raises(ValueError, match="window_length=1"):
@@ -105,7 +105,7 @@ def test_windows_by_index_are_padded_at_starts_and_never_cross_episodes():
 
 
 def test_overwrite_invalidates_whole_old_episodes():
-    buffer = EpisodeReplayBuffer(capacity=30, history=2)
+    buffer = EpisodeReplayBuffer(capacity=30, k=2)
     insert(buffer, 0, 9)   # rows 0..9
     insert(buffer, 1, 9)   # rows 10..19
     insert(buffer, 2, 4)   # rows 20..24
@@ -131,7 +131,7 @@ def test_labels_follow_furl_rule_and_groups_follow_the_stage():
     assert episode_labels(torch.zeros(3, dtype=torch.bool)).tolist() == [-1, -1, -1]
     assert episode_labels(torch.tensor([True])).tolist() == [1]
 
-    buffer = EpisodeReplayBuffer(capacity=200, history=2, gap=10)
+    buffer = EpisodeReplayBuffer(capacity=200, k=2, gap=10)
     insert(buffer, 0, 10)
     assert buffer.stage == 1
     assert set(buffer.finetuning.sample(8).keys()) == {"negative"}
@@ -159,7 +159,7 @@ def test_labels_follow_furl_rule_and_groups_follow_the_stage():
                        torch.full((400,), 10.0))
     assert (pairs["earlier", "label"] == POSITIVE).all()
     assert set(pairs["earlier", "step"].tolist()) == set(range(1, 8))
-    no_pairs = EpisodeReplayBuffer(capacity=200, history=2, gap=17)
+    no_pairs = EpisodeReplayBuffer(capacity=200, k=2, gap=17)
     insert(no_pairs, 1, 30, successes=(14, 15, 16, 20))
     assert set(no_pairs.finetuning.sample(4).keys()) == {"positive"}
     # with no valid positive yet, the positives fall back to every positive state
@@ -170,7 +170,7 @@ def test_pos_neg_positives_never_below_gap_over_many_draws():
     """FuRL's rule written out: a positive drawn for the pos-neg term has a lagged partner in
     its positive run, i.e. its step is above gap, on a 28-step positive episode."""
     gap = 10
-    buffer = EpisodeReplayBuffer(capacity=400, history=5, gap=gap)
+    buffer = EpisodeReplayBuffer(capacity=400, k=5, gap=gap)
     insert(buffer, 0, 40)
     insert(buffer, 1, 28, successes=(27,))  # states s_1 .. s_28 positive
     steps = torch.cat([buffer.finetuning.sample(256)["positive", "step"] for _ in range(40)])
@@ -183,7 +183,7 @@ def test_pos_neg_positives_never_below_gap_over_many_draws():
 def test_stage1_negatives_reach_the_oldest_episodes():
     """Before any positive, FuRL's neg-neg batch comes from the whole buffer: label_window
     (FuRL's stage-2 FIFO) does not apply; after a positive episode it does."""
-    buffer = EpisodeReplayBuffer(capacity=1000, history=2, label_window=20)
+    buffer = EpisodeReplayBuffer(capacity=1000, k=2, label_window=20)
     for episode in range(10):
         insert(buffer, episode, 9)  # 90 negative states, 4.5 windows
     drawn = torch.cat([buffer.finetuning.sample(512)["negative", "episode"] for _ in range(8)])
@@ -195,7 +195,7 @@ def test_stage1_negatives_reach_the_oldest_episodes():
 
 def test_permanent_episodes_survive_wrap_around():
     """Preloaded experts are never overwritten: the ring wraps to the row after them."""
-    buffer = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=1)
+    buffer = EpisodeReplayBuffer(capacity=40, k=2, permanent_episodes=1)
     insert(buffer, 0, 9, successes=(8,))  # rows 0..9
     for episode in range(1, 8):  # 10 rows each: the ring (rows 10..39) wraps twice
         insert(buffer, episode, 9)
@@ -205,14 +205,14 @@ def test_permanent_episodes_survive_wrap_around():
     check_histories(buffer, buffer.sample(300))
     with pytest.raises(ValueError, match="10 rows hold permanent episodes"):
         insert(buffer, 9, 30)
-    too_big = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=2)
+    too_big = EpisodeReplayBuffer(capacity=40, k=2, permanent_episodes=2)
     insert(too_big, 0, 25, successes=(8,))
     with pytest.raises(ValueError, match="permanent episodes fill more than"):
         insert(too_big, 1, 20, successes=(8,))
 
 
 def test_label_window_keeps_most_recent():
-    buffer = EpisodeReplayBuffer(capacity=500, history=2, label_window=12)
+    buffer = EpisodeReplayBuffer(capacity=500, k=2, label_window=12)
     for episode in range(4):
         insert(buffer, episode, 9)
     insert(buffer, 4, 3, successes=(1,))  # a positive: stage 2, where FuRL has the window
@@ -229,7 +229,7 @@ def test_sac_batches_are_relabelled_by_the_reward_as_it_is_now():
 
     reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
                             directional="d3", rho=1.0, lambda_=2.0, k=2)
-    buffer = EpisodeReplayBuffer(capacity=100, history=2, reward=reward, batch_size=64)
+    buffer = EpisodeReplayBuffer(capacity=100, k=2, reward=reward, batch_size=64)
     insert(buffer, 0, 30, successes=(20,))
     for _ in range(2):
         batch = buffer.sample()
@@ -246,41 +246,94 @@ def test_sac_batches_are_relabelled_by_the_reward_as_it_is_now():
 
 def test_history_comes_from_the_reward_and_a_different_one_is_refused():
     """k has one route: with a reward the buffer takes the reward's k (the env's history
-    transform's), and a different explicit ``history`` is refused, naming both values; so is a
+    transform's), and a different explicit ``k`` is refused, naming both values; so is a
     reward-head trainer on a buffer of another k, and an env built with another k."""
     from temporal_torchrl.envs import make_temporal_env
     from temporal_torchrl.rewards import TemporalReward
     from temporal_torchrl.training import RewardHeadTrainer
 
     reward = TemporalReward(D, torch.randn(D), torch.randn(D), k=5)
-    assert EpisodeReplayBuffer(capacity=100, reward=reward).history == 5
-    assert EpisodeReplayBuffer(capacity=100, history=5, reward=reward).history == 5
-    assert EpisodeReplayBuffer(capacity=100).history == 5  # no reward: the default
-    message = (r"EpisodeReplayBuffer: history=3 but reward\.k=5: s_\(t-3\) here against the "
-               r"s_\(t-5\) of the reward's history transform\. Leave history out \(k is taken "
-               r"from the reward\) or build the reward with k=3\.")
+    assert EpisodeReplayBuffer(capacity=100, reward=reward).k == 5
+    assert EpisodeReplayBuffer(capacity=100, k=5, reward=reward).k == 5
+    assert EpisodeReplayBuffer(capacity=100).k == 5  # no reward: the default
+    message = (r"EpisodeReplayBuffer: k=3 but reward\.k=5: s_\(t-3\) here against the "
+               r"s_\(t-5\) of the reward's history transform\. Leave k out \(it is taken from "
+               r"the reward\) or build the reward with k=3\.")
     with pytest.raises(ValueError, match=message):
-        EpisodeReplayBuffer(capacity=1000, history=3, reward=reward)
-    other = EpisodeReplayBuffer(capacity=100, history=3)
+        EpisodeReplayBuffer(capacity=1000, k=3, reward=reward)
+    other = EpisodeReplayBuffer(capacity=100, k=3)
     insert(other, 0, 10)
-    with pytest.raises(ValueError, match=r"RewardHeadTrainer: the replay's history k=3 but "
+    with pytest.raises(ValueError, match=r"RewardHeadTrainer: the replay's k=3 but "
                                          r"reward\.k=5.*EpisodeReplayBuffer\(\.\.\., "
                                          r"reward=reward\)"):
         RewardHeadTrainer(reward, torch.randn(D), other.finetuning)
-    with pytest.raises(ValueError, match=r"make_temporal_env: history=3 but reward\.k=5"):
+    with pytest.raises(ValueError, match=r"make_temporal_env: k=3 but reward\.k=5"):
         make_temporal_env("drawer-open", encoder=load_encoder("state", dim=D), reward=reward,
-                          history=3)
+                          k=3)
+
+
+def test_the_deprecated_history_keyword_warns_and_a_different_k_is_refused():
+    """``history=``, k's name before, is read for one more release with a FutureWarning that
+    names ``k=`` (the buffer, the env, the offline finetuning buffer); given beside a different
+    ``k`` it is refused, naming both."""
+    from temporal_torchrl.envs import make_temporal_env
+    from temporal_torchrl.reward_quality import make_finetuning_buffer
+
+    with pytest.warns(FutureWarning, match=r"EpisodeReplayBuffer: history= is deprecated.*k="):
+        assert EpisodeReplayBuffer(capacity=100, history=3).k == 3
+    with pytest.warns(FutureWarning, match=r"EpisodeReplayBuffer: history= is deprecated"):
+        assert EpisodeReplayBuffer(capacity=100, k=3, history=3).k == 3
+    with pytest.raises(ValueError, match=r"EpisodeReplayBuffer: k=2 and history=3 differ"):
+        EpisodeReplayBuffer(capacity=100, k=2, history=3)
+    with pytest.warns(FutureWarning, match=r"EpisodeReplayBuffer.history is deprecated.*\.k"):
+        assert EpisodeReplayBuffer(capacity=100, k=4).history == 4
+    with pytest.warns(FutureWarning, match=r"make_finetuning_buffer: history= is deprecated"):
+        assert make_finetuning_buffer([make_episode(0, 5)], history=3).k == 3
+    with pytest.raises(ValueError, match=r"make_temporal_env: k=2 and history=3 differ"):
+        make_temporal_env("drawer-open", encoder=load_encoder("state", dim=D), k=2, history=3)
+
+
+def test_no_history_keyword_is_left_in_the_package_but_the_deprecated_shims():
+    """k has one name: the package's source takes no ``history`` argument and passes no
+    ``history=`` keyword, but for the public signatures that read the deprecated keyword and
+    the shim that does (:func:`~temporal_torchrl.rewards.temporal.renamed_k`)."""
+    import ast
+    from pathlib import Path
+
+    import temporal_torchrl
+
+    shims = {"EpisodeReplayBuffer.__init__", "make_temporal_env", "make_finetuning_buffer",
+             "renamed_k", "EpisodeReplayBuffer.history"}
+    found = set()
+    package = Path(temporal_torchrl.__file__).parent
+    for path in sorted(package.rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call):
+                assert "history" not in {keyword.arg for keyword in node.keywords}, \
+                    f"{path}:{node.lineno} passes history="
+            if isinstance(node, ast.ClassDef):
+                for method in node.body:
+                    if isinstance(method, ast.FunctionDef):
+                        method.qualname = f"{node.name}.{method.name}"
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef):
+                name = getattr(node, "qualname", node.name)
+                arguments = node.args.args + node.args.kwonlyargs
+                if name.endswith(".history") or "history" in {a.arg for a in arguments}:
+                    found.add(name)
+    assert found == shims
 
 
 def test_buffer_state_round_trips_through_torchrl_dumps_and_loads(tmp_path):
     """TorchRL's own checkpointing (storage, writer, sampler) restores the episodes, the ring's
     cursor and the permanent rows: the next write lands where it would have."""
-    buffer = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=1)
+    buffer = EpisodeReplayBuffer(capacity=40, k=2, permanent_episodes=1)
     insert(buffer, 0, 9, successes=(8,))
     for episode in range(1, 5):
         insert(buffer, episode, 9)
     buffer.dumps(tmp_path / "buffer")
-    restored = EpisodeReplayBuffer(capacity=40, history=2, permanent_episodes=1)
+    restored = EpisodeReplayBuffer(capacity=40, k=2, permanent_episodes=1)
     restored.loads(tmp_path / "buffer")
     assert restored.writer.episodes == buffer.writer.episodes
     assert torch.equal(all_transitions(restored)["next", "embedding"],
@@ -298,7 +351,7 @@ def test_memory_at_500k_transitions_is_under_budget():
     """Bytes per row measured on a full small buffer, extrapolated to 500,000 transitions of
     500-step episodes (501 rows each) with D = 1024."""
     capacity = 5 * 501
-    buffer = EpisodeReplayBuffer(capacity=capacity, history=5)
+    buffer = EpisodeReplayBuffer(capacity=capacity, k=5)
     for episode in range(5):
         insert(buffer, episode, 500, dim=1024)
     per_row = buffer.memory_bytes() / capacity
@@ -307,7 +360,7 @@ def test_memory_at_500k_transitions_is_under_budget():
 
 
 def test_episodes_must_carry_the_same_keys():
-    buffer = EpisodeReplayBuffer(capacity=50, history=2)
+    buffer = EpisodeReplayBuffer(capacity=50, k=2)
     buffer.extend(episode_rows(make_episode(0, 5).exclude("embedding", ("next", "embedding"))))
     batch = buffer.sample(4)
     assert "embedding" not in batch["next"].keys() and batch["next", "observation"].shape == (4, 39)
@@ -320,13 +373,13 @@ def test_whole_preloaded_positive_gives_sac_its_reward_zero_transitions():
     counted here from the success pattern the episode was built with (success after steps
     100..299, lost, back after 400..499), not from the buffer's labels."""
     successes = list(range(100, 300)) + list(range(400, 500))
-    buffer = EpisodeReplayBuffer(capacity=600, history=5, permanent_episodes=1)
+    buffer = EpisodeReplayBuffer(capacity=600, k=5, permanent_episodes=1)
     insert(buffer, 0, 500, successes=successes)
     transitions = all_transitions(buffer)
     assert buffer.num_transitions == transitions.shape[0] == 500
     assert int((transitions["next", "reward"] == 0).sum()) == len(successes) == 300
     # The finetuning's positives run from the start to where success is first lost: s_1..s_300
     assert buffer.num_positive_states == 300
-    cut = EpisodeReplayBuffer(capacity=600, history=5, permanent_episodes=1)
+    cut = EpisodeReplayBuffer(capacity=600, k=5, permanent_episodes=1)
     insert(cut, 0, 106, successes=range(100, 106))  # the old preload: cut 5 steps after
     assert int((all_transitions(cut)["next", "reward"] == 0).sum()) == 6

@@ -183,7 +183,7 @@ def test_ranking_loss_learns_to_order_expert_states_by_time(tmp_path):
     torch.manual_seed(0)
     experts = factories.make_expert_episodes(cfg, None, 4)
     encoder = load_encoder("state", dim=32)
-    buffer = EpisodeReplayBuffer(capacity=5000, history=5, gap=10)
+    buffer = EpisodeReplayBuffer(capacity=5000, k=5, gap=10)
     embed = encoder.embed
     for episode in experts[:3]:
         episode = episode.clone()

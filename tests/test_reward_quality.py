@@ -189,7 +189,7 @@ def test_scoring_refuses_a_reward_with_two_parts(held_out_episodes):
 
 def test_finetuning_trains_heads_towards_the_labels(held_out_episodes):
     successful, failed = held_out_episodes
-    buffer = make_finetuning_buffer([*successful, *failed], history=3, gap=3)
+    buffer = make_finetuning_buffer([*successful, *failed], k=3, gap=3)
     torch.manual_seed(0)
     reward = TemporalReward(D, torch.ones(D), torch.zeros(D), **single_part("furl"), k=3)
     before = score_reward(reward, successful, failed).auroc
@@ -198,7 +198,7 @@ def test_finetuning_trains_heads_towards_the_labels(held_out_episodes):
     assert set(losses) == {"loss_positional"}
     after = score_reward(reward, successful, failed)
     assert after.auroc > max(before, 0.9)
-    stage_one = make_finetuning_buffer([*successful, *failed], stage=1, history=3)
+    stage_one = make_finetuning_buffer([*successful, *failed], stage=1, k=3)
     assert stage_one.stage == 1 and stage_one.num_episodes == 2
 
 

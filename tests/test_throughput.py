@@ -107,13 +107,13 @@ def test_compiled_reward_head_losses_match_the_eager_ones(tmp_path, stage):
     from temporal_torchrl.data import EpisodeReplayBuffer
     from temporal_torchrl.data import episode_rows as stored_rows
 
-    buffer = EpisodeReplayBuffer(capacity=200, history=2, gap=5)
+    buffer = EpisodeReplayBuffer(capacity=200, k=2, gap=5)
     buffer.extend(stored_rows(make_episode(0, 20), embedding_dtype=torch.float32))
     buffer.extend(stored_rows(make_episode(1, 20, successes=(12,) if stage == 2 else ()),
                               embedding_dtype=torch.float32))
     cfg = config(tmp_path, "reward.directional=d3", "compile.enabled=true")
     reward = make_temporal_reward("drawer-open", load_encoder("state", dim=4),
-                                  positional="furl", directional="d3", k=buffer.history)
+                                  positional="furl", directional="d3", k=buffer.k)
     trainer = factories.make_reward_trainer(cfg, reward, torch.ones(4), buffer)
     batch = buffer.finetuning.sample(16)
     assert trainer.stage == stage

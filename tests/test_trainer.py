@@ -17,7 +17,7 @@ D, DELTA, LR = 4, 0.1, 1e-3
 
 
 def filled_buffer(gap: int = 5) -> EpisodeReplayBuffer:
-    buffer = EpisodeReplayBuffer(capacity=200, history=2, gap=gap)
+    buffer = EpisodeReplayBuffer(capacity=200, k=2, gap=gap)
     buffer.extend(episode_rows(make_episode(0, 20), embedding_dtype=torch.float32))
     return buffer
 
@@ -25,7 +25,7 @@ def filled_buffer(gap: int = 5) -> EpisodeReplayBuffer:
 def make_trainer(buffer: EpisodeReplayBuffer, seed: int = 0) -> RewardHeadTrainer:
     torch.manual_seed(seed)
     reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
-                            directional="d3", k=buffer.history)
+                            directional="d3", k=buffer.k)
     return RewardHeadTrainer(reward, torch.full((D,), 25.0), buffer.finetuning, batch_size=8,
                              lr=LR, delta=DELTA)
 

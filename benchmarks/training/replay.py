@@ -19,7 +19,7 @@ def filled_buffers(transitions: int, dim: int = 1024, episode_length: int = 500
                    ) -> tuple[EpisodeReplayBuffer, TensorDictReplayBuffer]:
     """The project's buffer and a TorchRL SliceSampler buffer, both with ``transitions``."""
     episodes = transitions // episode_length
-    ours = EpisodeReplayBuffer(capacity=episodes * (episode_length + 1), history=5,
+    ours = EpisodeReplayBuffer(capacity=episodes * (episode_length + 1), k=5,
                                permanent_episodes=1)
     reference = TensorDictReplayBuffer(
         storage=LazyTensorStorage(transitions),

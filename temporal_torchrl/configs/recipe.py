@@ -112,7 +112,7 @@ class SharedRewardConfig:
     #: those ``register_reward(..., options=...)`` declares.
     options: dict[str, Any] = field(default_factory=dict)
     #: k, the history offset of s_{t-k}.
-    k: int = constrained(defaults.HISTORY, ge=1)
+    k: int = constrained(defaults.K, ge=1)
     #: alpha, the goal-baseline regularisation of P3, P4 and D5.
     alpha: float = constrained(defaults.ALPHA, ge=0, le=1)
     #: The baseline text b: generic | tailored | any text.
@@ -121,7 +121,7 @@ class SharedRewardConfig:
     projection: str = constrained(defaults.PROJECTION, choices=defaults.PROJECTIONS)
     #: delta, the ranking margin of the positional loss.
     delta: float = constrained(defaults.DELTA, ge=0)
-    #: The stage-1 goal-distance margin.
+    #: The finetuning stage-1 goal-distance margin.
     l2_margin: float = constrained(defaults.L2_MARGIN, ge=0)
     #: The pos-pos lag (and the first steps never drawn as positives).
     gap: int = constrained(defaults.GAP, ge=1)
@@ -196,7 +196,7 @@ class TrainConfig:
 
     #: Training episodes (the default run: README.md; the thesis: 1,000).
     episodes: int = constrained(5, ge=1)
-    #: Expert episodes inserted as positives before training (stage 2: 50).
+    #: Expert episodes inserted as positives before training (protocol stage 2: 50).
     preload_positives: int = constrained(0, ge=0)
     #: null: experts kept whole (500 steps), as the thesis release preloads its positives; n: cut
     #: n steps after the first success.
@@ -204,8 +204,8 @@ class TrainConfig:
     #: Save every successful training episode, whole, in ``<run>/positives/``.
     save_positives: bool = False
     #: Preload the first ``preload_positives`` positives another run saved (the thesis release's
-    #: stage 2: a stage-1 run with save_positives=true); null: scripted-expert episodes of this
-    #: run's layout.
+    #: protocol stage 2: a stage-1 run with save_positives=true); null: scripted-expert episodes
+    #: of this run's layout.
     positives_from: str | None = None
     #: FuRL's relay exploration (the release keeps it on): episodes alternate between this agent
     #: and a SAC agent on the sparse reward until the finetuning holds relay_threshold positive
@@ -215,7 +215,7 @@ class TrainConfig:
     relay_periods: list[int] = constrained(list(defaults.RELAY_PERIODS), ge=1, nonempty=True)
     #: Gaussian noise on the relay agent's actions, times the action bound.
     relay_noise: float = constrained(defaults.RELAY_NOISE, ge=0)
-    #: Positive states that end relay (stage 2's 50 preloaded: it never starts).
+    #: Positive states that end relay (protocol stage 2's 50 preloaded: it never starts).
     relay_threshold: int = constrained(defaults.RELAY_THRESHOLD, ge=0)
     #: Uniform random actions first (the thesis: 10,000).
     random_steps: int = constrained(1000, ge=0)
@@ -264,8 +264,8 @@ class LoggerConfig:
     #: The experiment's name (null: the run directory's).
     exp_name: str | None = None
     #: SAC updates between logged training metrics (means over them): SAC's losses, alpha,
-    #: entropy; each finetuning loss term; the stage; the number of positive states; mean/std of
-    #: the relabelled r_P and r_D; the seconds per phase of the loop.
+    #: entropy; each finetuning loss term; the finetuning stage; the number of positive states;
+    #: mean/std of the relabelled r_P and r_D; the seconds per phase of the loop.
     log_every: int = constrained(1000, ge=1)
 
 

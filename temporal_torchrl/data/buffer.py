@@ -48,7 +48,7 @@ Example:
     ...     "next": {"observation": torch.randn(T, 39), "embedding": torch.randn(T, 8),
     ...              "success": torch.zeros(T, 1, dtype=torch.bool),
     ...              "terminated": torch.zeros(T, 1, dtype=torch.bool)}}, [T])
-    >>> buffer = EpisodeReplayBuffer(capacity=100, history=2)
+    >>> buffer = EpisodeReplayBuffer(capacity=100, k=2)
     >>> _ = buffer.extend(episode_rows(episode))
     >>> batch = buffer.sample(4)
     >>> batch["next", "previous_embedding"].shape
@@ -61,6 +61,8 @@ Example:
 
 from __future__ import annotations
 
+import warnings
+
 import torch
 from torchrl.data import ReplayBuffer
 from torchrl.data.replay_buffers import ImmutableDatasetWriter
@@ -71,7 +73,7 @@ from temporal_torchrl.data.samplers import FinetuningSampler, TransitionSampler
 from temporal_torchrl.data.storage import EpisodeStorage
 from temporal_torchrl.data.writer import EpisodeWriter
 from temporal_torchrl.defaults import GAP, LABEL_WINDOW
-from temporal_torchrl.rewards.temporal import TemporalReward, history_offset
+from temporal_torchrl.rewards.temporal import TemporalReward, renamed_k, resolve_k
 
 
 class EpisodeReplayBuffer(ReplayBuffer):
@@ -85,11 +87,11 @@ class EpisodeReplayBuffer(ReplayBuffer):
     Args:
         capacity: number of stored rows; an episode of ``T`` transitions takes ``T + 1`` rows
             (one per state), so 500 transitions per episode use 0.2 % more than ``T`` rows.
-        history: ``k``, the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3).
+        k: the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3, ``reward.k``).
             With a ``reward`` leave it out: k is the reward's ``k``, the one the env's history
             transform uses, and a different value is refused (the relabelled batches would read
             another s_{t-k} than the env wrote). Without a reward, default
-            :data:`~temporal_torchrl.defaults.HISTORY`.
+            :data:`~temporal_torchrl.defaults.K`.
         window_length: K (>= 2): batches also carry ``"embedding_window"``, the last K
             embeddings of each state (the reward's ``window_length``; None: no window).
         label_window, gap: the finetuning sampler's (:class:`FinetuningSampler`).
@@ -102,29 +104,32 @@ class EpisodeReplayBuffer(ReplayBuffer):
         device: where the storage lives.
         batch_device: where batches are returned (and relabelled): the training device; None:
             the storage's. From a CPU storage to a GPU, batches go through pinned memory.
+        history: the deprecated name of ``k`` (a FutureWarning; removed in the next release).
     """
 
-    def __init__(self, capacity: int, *, history: int | None = None,
+    def __init__(self, capacity: int, *, k: int | None = None,
                  window_length: int | None = None, label_window: int | None = LABEL_WINDOW,
                  gap: int = GAP, permanent_episodes: int = 0,
                  reward: TemporalReward | None = None, batch_size: int | None = None,
                  finetuning_batch_size: int | None = None,
                  device: torch.device | str = "cpu",
-                 batch_device: torch.device | str | None = None) -> None:
+                 batch_device: torch.device | str | None = None,
+                 history: int | None = None) -> None:
         from temporal_torchrl.transforms.reward import TemporalRewardTransform
 
         if capacity < 2:
             raise ValueError(f"capacity={capacity} must be >= 2 rows (one episode of one step).")
-        history = history_offset(history, reward, "EpisodeReplayBuffer")
+        k = resolve_k(renamed_k(k, history, "EpisodeReplayBuffer"), reward,
+                      "EpisodeReplayBuffer")
         storage = EpisodeStorage(capacity, device=device)
         writer = EpisodeWriter(permanent_episodes)
         transforms = [TransitionLayout(window_length, batch_device)]
         if reward is not None:
             transforms.append(TemporalRewardTransform(reward))
         super().__init__(storage=storage, writer=writer,
-                         sampler=TransitionSampler(writer, history, window_length),
+                         sampler=TransitionSampler(writer, k, window_length),
                          transform=Compose(*transforms), batch_size=batch_size)
-        finetuning_sampler = FinetuningSampler(writer, history, window_length, gap=gap,
+        finetuning_sampler = FinetuningSampler(writer, k, window_length, gap=gap,
                                                label_window=label_window)
         self.finetuning = ReplayBuffer(
             storage=storage, writer=ImmutableDatasetWriter(), sampler=finetuning_sampler,
@@ -132,9 +137,17 @@ class EpisodeReplayBuffer(ReplayBuffer):
             batch_size=finetuning_batch_size)
 
     @property
+    def k(self) -> int:
+        """k, the offset of s_{t-k} (``reward.k``)."""
+        return self.sampler.k
+
+    @property
     def history(self) -> int:
-        """k, the offset of s_{t-k}."""
-        return self.sampler.history
+        """Deprecated name of :attr:`k` (a FutureWarning; removed in the next release)."""
+        warnings.warn("EpisodeReplayBuffer.history is deprecated and will be removed in the next "
+                      "release; read .k (the offset of s_(t-k), reward.k).", FutureWarning,
+                      stacklevel=2)
+        return self.k
 
     @property
     def window_length(self) -> int | None:

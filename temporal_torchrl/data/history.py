@@ -27,24 +27,24 @@ def _window_rows(rows: torch.Tensor, step: torch.Tensor, window_length: int) -> 
     return rows.unsqueeze(-1) - torch.minimum(offsets, step.unsqueeze(-1))
 
 
-def state_index(rows: torch.Tensor, step: torch.Tensor, history: int,
+def state_index(rows: torch.Tensor, step: torch.Tensor, k: int,
                 window_length: int | None = None) -> torch.Tensor:
     """The rows a state needs, ``[..., 3 (+ K)]``: ``[s_t, s_0, s_{t-k}, window...]``."""
     rows, step = rows.long(), step.long()
-    columns = [rows, rows - step, rows - torch.clamp(step, max=history)]
+    columns = [rows, rows - step, rows - torch.clamp(step, max=k)]
     index = torch.stack(columns, -1)
     if window_length:
         index = torch.cat([index, _window_rows(rows, step, window_length)], -1)
     return index
 
 
-def transition_index(rows: torch.Tensor, step: torch.Tensor, history: int,
+def transition_index(rows: torch.Tensor, step: torch.Tensor, k: int,
                      window_length: int | None = None) -> torch.Tensor:
     """The rows a transition from state ``t`` needs, ``[..., 4 (+ K)]``:
     ``[t, t + 1, s_0, s_{t+1-k}, window of s_{t+1}...]``."""
     rows, step = rows.long(), step.long()
     following = rows + 1
-    columns = [rows, following, rows - step, following - torch.clamp(step + 1, max=history)]
+    columns = [rows, following, rows - step, following - torch.clamp(step + 1, max=k)]
     index = torch.stack(columns, -1)
     if window_length:
         index = torch.cat([index, _window_rows(following, step + 1, window_length)], -1)

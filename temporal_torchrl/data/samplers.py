@@ -30,12 +30,12 @@ def _draw(candidates: torch.Tensor, batch_size: int, what: str) -> torch.Tensor:
 class _EpisodeRowSampler(Sampler):
     """Shared by the two samplers: they read the :class:`EpisodeWriter`'s row sets."""
 
-    def __init__(self, writer: EpisodeWriter, history: int, window_length: int | None) -> None:
-        if history < 1:
-            raise ValueError(f"history={history} must be >= 1 (k, the embedding offset).")
+    def __init__(self, writer: EpisodeWriter, k: int, window_length: int | None) -> None:
+        if k < 1:
+            raise ValueError(f"k={k} must be >= 1 (the offset of s_(t-k)).")
         check_window_length(window_length, optional=True)
         self.writer = writer
-        self.history = history
+        self.k = k
         self.window_length = window_length
 
     def _empty(self) -> None:
@@ -63,14 +63,14 @@ class TransitionSampler(_EpisodeRowSampler):
 
     Args:
         writer: the buffer's :class:`EpisodeWriter`.
-        history: ``k``, the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3).
+        k: the offset of the previous embedding ``s_{t-k}`` (thesis section 4.3, ``reward.k``).
         window_length: K: also the rows of the last K embeddings (d_sequence); None: none.
     """
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[torch.Tensor, dict]:
         rows = self.writer.rows()
         pick = _draw(rows["transitions"], batch_size, "transitions")
-        index = transition_index(rows["transitions"][pick], rows["steps"][pick], self.history,
+        index = transition_index(rows["transitions"][pick], rows["steps"][pick], self.k,
                                  self.window_length)
         return index, {}
 
@@ -94,16 +94,16 @@ class FinetuningSampler(_EpisodeRowSampler):
     :class:`FinetuningLayout` names the groups.
 
     Args:
-        writer, history, window_length: as :class:`TransitionSampler`.
+        writer, k, window_length: as :class:`TransitionSampler`.
         gap: the positive pairs' lag (``reward.gap``).
         label_window: once positives exist, positives and negatives are drawn from the most
             recent ``label_window`` labelled states of each kind (FuRL's two FIFO buffers of
             20,000 embeddings); None: all of them.
     """
 
-    def __init__(self, writer: EpisodeWriter, history: int, window_length: int | None, *,
+    def __init__(self, writer: EpisodeWriter, k: int, window_length: int | None, *,
                  gap: int = GAP, label_window: int | None = LABEL_WINDOW) -> None:
-        super().__init__(writer, history, window_length)
+        super().__init__(writer, k, window_length)
         if gap < 1:
             raise ValueError(f"gap={gap} must be >= 1 (the positive pairs' lag).")
         if label_window is not None and label_window < 1:
@@ -171,6 +171,6 @@ class FinetuningSampler(_EpisodeRowSampler):
             if name == "positive_pair":
                 anchors.append(anchors[-1] - self.gap)
                 steps.append(steps[-1] - self.gap)
-        index = state_index(torch.stack(anchors), torch.stack(steps), self.history,
+        index = state_index(torch.stack(anchors), torch.stack(steps), self.k,
                             self.window_length)
         return index, {"groups": groups}

@@ -19,7 +19,7 @@ from temporal_torchrl import defaults
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.metaworld_env import make_env
 from temporal_torchrl.rewards import TemporalReward
-from temporal_torchrl.rewards.temporal import history_offset
+from temporal_torchrl.rewards.temporal import renamed_k, resolve_k
 from temporal_torchrl.transforms import (
     EmbeddingHistoryTransform,
     EmbeddingTransform,
@@ -28,16 +28,16 @@ from temporal_torchrl.transforms import (
 
 
 def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = None,
-                      reward: TemporalReward | None = None, history: int | None = None,
+                      reward: TemporalReward | None = None, k: int | None = None,
                       image_size: int = 224, camera: str = defaults.CAMERA,
                       fast_render: bool = defaults.FAST_RENDER,
                       max_episode_steps: int = defaults.MAX_EPISODE_STEPS, num_envs: int = 1,
-                      goal: str = defaults.GOAL) -> EnvBase:
+                      goal: str = defaults.GOAL, history: int | None = None) -> EnvBase:
     """``task``'s env -> (render) -> embedding -> history -> temporal reward.
 
     Frames are rendered only when ``encoder`` reads pixels; without an encoder the plain task
     env (sparse reward) is returned. The history transform keeps s_0 and s_{t-k}, ``k`` from
-    ``reward`` (or ``history`` without one), and the window a d_sequence reward reads.
+    ``reward`` (or ``k`` without one), and the window a d_sequence reward reads.
 
     With ``num_envs`` > 1 the task (fixed goal: the same layout; random goal: each worker its
     own layout stream, so no two workers share layouts) runs in that many worker processes
@@ -51,14 +51,16 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
         encoder: embeds each state into ``"embedding"``; None: no VLM transforms.
         reward: appended as a :class:`~temporal_torchrl.transforms.TemporalRewardTransform`;
             None: the env stops at the history (embeddings only).
-        history: k when there is no reward (default 5); with a reward, k is the reward's
-            ``k`` and a different ``history`` is refused.
+        k: the offset of s_(t-k) when there is no reward (default
+            :data:`~temporal_torchrl.defaults.K`); with a reward, k is the reward's ``k`` and a
+            different one is refused.
         image_size, camera, fast_render, max_episode_steps: as in
             :func:`~temporal_torchrl.envs.make_env`.
         num_envs: copies of the task stepped in parallel (batch size ``[num_envs]``); 1: a
             single env with batch size ``[]``.
         goal: ``"fixed"`` (one layout, the thesis) or ``"random"`` (a new layout at every reset,
             from the seed's training stream; :class:`~temporal_torchrl.envs.MetaworldEnv`).
+        history: the deprecated name of ``k`` (a FutureWarning; removed in the next release).
 
     Example:
         >>> from temporal_torchrl.encoders import load_encoder
@@ -73,7 +75,8 @@ def make_temporal_env(task: str, seed: int = 0, *, encoder: Encoder | None = Non
     """
     if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs={num_envs!r}; expected an integer >= 1.")
-    k = history_offset(history, reward, "make_temporal_env")  # refused before any env is built
+    # refused before any env is built
+    k = resolve_k(renamed_k(k, history, "make_temporal_env"), reward, "make_temporal_env")
     render = encoder is not None and encoder.input_key == "pixels"
     if render:
         encoder.check_frame_size(image_size)

@@ -16,27 +16,33 @@ from torch import Tensor
 
 from temporal_torchrl import defaults
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
-from temporal_torchrl.defaults import GAP, HISTORY, LABEL_WINDOW, STAGES
+from temporal_torchrl.defaults import GAP, LABEL_WINDOW, STAGES
 from temporal_torchrl.objectives import HEADS_LEARNING_RATE
 from temporal_torchrl.rewards import TemporalReward
+from temporal_torchrl.rewards.temporal import renamed_k
 from temporal_torchrl.training import RewardHeadTrainer
 
 
 def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2,
-                           history: int = HISTORY, label_window: int | None = LABEL_WINDOW,
+                           k: int | None = None, label_window: int | None = LABEL_WINDOW,
                            window_length: int | None = None, gap: int = GAP,
-                           embedding_dtype: torch.dtype = torch.float16) -> EpisodeReplayBuffer:
+                           embedding_dtype: torch.dtype = torch.float16,
+                           history: int | None = None) -> EpisodeReplayBuffer:
     """A replay buffer holding the training episodes the finetuning losses sample from.
 
-    Stage 2 inserts every episode (positives from the successful ones); stage 1 only the failed
-    ones, so every batch carries negatives alone and the losses run their stage-1 form.
+    Finetuning stage 2 inserts every episode (positives from the successful ones); finetuning
+    stage 1 only the failed ones, so every batch carries negatives alone and the losses run their
+    stage-1 form. (The finetuning stage, ``finetune.stage``, is not the protocol stage,
+    ``protocol=stage1|stage2``, which says whether expert episodes are preloaded.)
 
     Args:
         episodes: embedded episodes in ``env.rollout()`` layout.
-        stage: 1 or 2 (:data:`STAGES`).
-        history, label_window, window_length, gap, embedding_dtype: as the training run's
-            buffer (``reward.k``, ``reward.label_window``, the reward's ``window_length`` when
-            it reads a window, ``reward.gap``, ``replay_buffer.embedding_dtype``).
+        stage: the finetuning stage, 1 or 2 (:data:`STAGES`).
+        k, label_window, window_length, gap, embedding_dtype: as the training run's
+            buffer (``reward.k``, default :data:`~temporal_torchrl.defaults.K`;
+            ``reward.label_window``; the reward's ``window_length`` when it reads a window;
+            ``reward.gap``; ``replay_buffer.embedding_dtype``).
+        history: the deprecated name of ``k`` (a FutureWarning; removed in the next release).
     """
     if stage not in STAGES:
         raise ValueError(f"stage={stage!r}; expected 1 (failed episodes only) or 2 (successful "
@@ -46,7 +52,8 @@ def make_finetuning_buffer(episodes: Sequence[TensorDictBase], *, stage: int = 2
     if not episodes:
         raise ValueError("no episodes to finetune on; the training part needs failed episodes "
                          "(stage 1) or any episodes (stage 2).")
-    buffer = EpisodeReplayBuffer(sum(len(episode) + 1 for episode in episodes), history=history,
+    buffer = EpisodeReplayBuffer(sum(len(episode) + 1 for episode in episodes),
+                                 k=renamed_k(k, history, "make_finetuning_buffer"),
                                  label_window=label_window, window_length=window_length, gap=gap)
     for episode in episodes:
         buffer.extend(episode_rows(episode, embedding_dtype=embedding_dtype))

@@ -60,7 +60,8 @@ _SIGNATURE = (f"fn(heads, s, *, g, b, s0=None, s_prev=None, alpha={ALPHA}, posit
 #: The types an option's default may have (what a config's ``reward.options.<key>`` can hold).
 OPTION_TYPES = (bool, int, float, str, type(None))
 #: The option every reward registered with ``image_input="window"`` has (d_sequence's, a window
-#: reward of one's own alike): K, the number of embeddings s_(t-K+1) .. s_t it reads. It sizes
+#: reward of one's own alike): the window length K, the number of embeddings s_(t-K+1) .. s_t it
+#: reads (``window_length`` everywhere in Python: the option's value, not the window). It sizes
 #: the heads' sequence encoder and the windows the history transform and the replay buffer
 #: build; the function is not passed K, it receives the window itself as ``window``.
 WINDOW_OPTIONS = MappingProxyType({"window": WINDOW_LENGTH})

@@ -37,22 +37,40 @@ def check_window_length(window_length: int | None, *, optional: bool = False) ->
                          "embeddings s_(t-K+1) .. s_t).")
 
 
-def history_offset(history: int | None, reward: TemporalReward | None, where: str) -> int:
+def renamed_k(k: int | None, history: int | None, where: str) -> int | None:
+    """``k`` from a public signature that took it as ``history=`` before (deprecated, read for one
+    more release): the history offset has one name, ``k`` (``reward.k``), across config,
+    constructors and docs. None when neither is given.
+
+    Raises:
+        ValueError: both given, with different values; ``where`` names the caller.
+    """
+    if history is None:
+        return k
+    if k is not None and k != history:
+        raise ValueError(f"{where}: k={k!r} and history={history!r} differ; history= is the "
+                         "deprecated name of k=: pass k= alone.")
+    warnings.warn(f"{where}: history= is deprecated and will be removed in the next release; "
+                  "pass k= (the offset of s_(t-k), reward.k).", FutureWarning, stacklevel=3)
+    return history
+
+
+def resolve_k(k: int | None, reward: TemporalReward | None, where: str) -> int:
     """k for a part that builds histories beside ``reward`` (the env's history transform, the
     replay buffer): the reward's own ``k`` when there is a reward, so k has one route and the
     s_(t-k) the env writes, the replay relabels with and the losses train on is the same one;
-    ``history`` (default :data:`~temporal_torchrl.defaults.HISTORY`) without a reward.
+    ``k`` (default :data:`~temporal_torchrl.defaults.K`) without a reward.
 
     Raises:
-        ValueError: ``history`` given and not the reward's ``k``; ``where`` names the caller.
+        ValueError: ``k`` given and not the reward's ``k``; ``where`` names the caller.
     """
     if reward is None:
-        return defaults.HISTORY if history is None else history
-    if history is not None and history != reward.k:
+        return defaults.K if k is None else k
+    if k is not None and k != reward.k:
         raise ValueError(
-            f"{where}: history={history!r} but reward.k={reward.k}: s_(t-{history}) here against "
-            f"the s_(t-{reward.k}) of the reward's history transform. Leave history out (k is "
-            f"taken from the reward) or build the reward with k={history}.")
+            f"{where}: k={k!r} but reward.k={reward.k}: s_(t-{k}) here against the "
+            f"s_(t-{reward.k}) of the reward's history transform. Leave k out (it is taken from "
+            f"the reward) or build the reward with k={k}.")
     return reward.k
 
 
@@ -125,7 +143,7 @@ class TemporalReward(nn.Module):
                  positional: str | None = defaults.POSITIONAL_REWARD,
                  directional: str | None = defaults.DIRECTIONAL_REWARD,
                  rho: float = defaults.RHO, lambda_: float = defaults.LAMBDA,
-                 k: int = defaults.HISTORY, alpha: float = defaults.ALPHA,
+                 k: int = defaults.K, alpha: float = defaults.ALPHA,
                  projection: str = defaults.PROJECTION,
                  certainty_scaling: bool = False,
                  options: Mapping[str, Any] | None = None, **moved: Any):

@@ -217,7 +217,7 @@ def make_replay_buffer(cfg: DictConfig, capacity: int, reward: TemporalReward | 
     batches; the preloaded experts are permanent. k and the window come from ``reward``, as
     the env's history transform takes them (``reward.k`` without a reward)."""
     return EpisodeReplayBuffer(
-        capacity, history=cfg.reward.k if reward is None else None,
+        capacity, k=cfg.reward.k if reward is None else None,
         window_length=reward.window_length if reward is not None else None,
         label_window=cfg.reward.label_window, gap=cfg.reward.gap,
         permanent_episodes=cfg.train.preload_positives, reward=reward,

@@ -46,7 +46,7 @@ class RewardHeadTrainer:
         >>> D, T = 8, 20
         >>> reward = TemporalReward(D, torch.randn(D), torch.randn(D), positional="furl",
         ...                         directional=None, k=2)
-        >>> buffer = EpisodeReplayBuffer(100, history=reward.k)
+        >>> buffer = EpisodeReplayBuffer(100, k=reward.k)
         >>> episode = TensorDict({"embedding": torch.randn(T, D), "action": torch.rand(T, 4),
         ...     "next": {"embedding": torch.randn(T, D),
         ...              "success": torch.zeros(T, 1, dtype=torch.bool)}}, [T])
@@ -65,14 +65,14 @@ class RewardHeadTrainer:
                  compile_mode: str | None = None) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size={batch_size!r}; expected an integer >= 1.")
-        history = getattr(replay.sampler, "history", reward.k)
-        if history != reward.k:
+        k = getattr(replay.sampler, "k", reward.k)
+        if k != reward.k:
             raise ValueError(
-                f"RewardHeadTrainer: the replay's history k={history} but reward.k={reward.k}: "
-                f"the losses would train directions s_t - s_(t-{history}) while the env's "
+                f"RewardHeadTrainer: the replay's k={k} but reward.k={reward.k}: "
+                f"the losses would train directions s_t - s_(t-{k}) while the env's "
                 f"history transform gives the reward s_t - s_(t-{reward.k}). Build the buffer "
                 "with the reward, EpisodeReplayBuffer(..., reward=reward), or with "
-                "history=reward.k.")
+                "k=reward.k.")
         self.reward = reward
         self.replay = replay
         self.batch_size = batch_size

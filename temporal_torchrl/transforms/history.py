@@ -10,7 +10,7 @@ from torch import Tensor
 from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
-from temporal_torchrl.defaults import HISTORY
+from temporal_torchrl.defaults import K
 from temporal_torchrl.rewards.temporal import check_window_length
 
 INITIAL_EMBEDDING_KEY = "initial_embedding"
@@ -56,7 +56,7 @@ class EmbeddingHistoryTransform(Transform):
         ([1.0, 1.0, 1.0], [0.0, 0.0, 0.0])
     """
 
-    def __init__(self, k: int = HISTORY, in_key: str = "embedding",
+    def __init__(self, k: int = K, in_key: str = "embedding",
                  window_length: int | None = None):
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
             raise ValueError(f"k={k!r}; expected an integer >= 1 (the offset of s_(t-k)).")

@@ -54,7 +54,7 @@ def task_targets(cfg, encoder) -> dict[tuple[float, float], dict[str, float]]:
     """Mean target per query kind, per (beta, c), over BATCHES batches of one task."""
     data = prepare_task(cfg, encoder)
     train, goal = data.train, data.goal_image
-    buffer = make_finetuning_buffer(train.episodes, history=cfg.reward.k,
+    buffer = make_finetuning_buffer(train.episodes, k=cfg.reward.k,
                                     label_window=cfg.reward.label_window)
     generator = torch.Generator().manual_seed(cfg.env.seed)
     sums = {(beta, prior): dict.fromkeys(KINDS, 0.0) for beta in BANDWIDTHS for prior in PRIORS}

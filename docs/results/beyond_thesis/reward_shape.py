@@ -95,7 +95,7 @@ def task_shapes(cfg, encoder) -> dict[str, dict[str, float]]:
     train, successful, failed = data.train, data.successful, data.failed
     goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
-                                    history=cfg.reward.k, label_window=cfg.reward.label_window,
+                                    k=cfg.reward.k, label_window=cfg.reward.label_window,
                                     gap=cfg.reward.gap)
     shapes = {}
     for label, variant, scaling in CONFIGURATIONS:

@@ -113,7 +113,7 @@ def task_scores(cfg, encoder) -> dict[str, tuple[float, float]]:
     train, successful, failed = data.train, data.successful, data.failed
     goal_image, texts = data.goal_image, (data.goal_embedding, data.baseline_embedding)
     buffer = make_finetuning_buffer(train.episodes, stage=cfg.finetune.stage,
-                                    history=cfg.reward.k, label_window=cfg.reward.label_window,
+                                    k=cfg.reward.k, label_window=cfg.reward.label_window,
                                     window_length=configured_window(cfg), gap=cfg.reward.gap)
     scores = {}
     for name in ENCODERS:
