@@ -3,8 +3,10 @@ the planned seeds, Δ, Holm over the primary pairs, the seeds added after lookin
 each run's commits; the p-values against a relabelling enumerated here."""
 
 import csv
+import hashlib
 import itertools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,3 +125,14 @@ def test_a_claim_without_a_complete_task_is_named(runs):
     groups = group_runs(find_runs([runs]))
     with pytest.raises(ValueError, match=r"no task has every planned seed \(0, 1, 2\)"):
         build_primary_claim(groups, [(LABELS[BEST], LABELS[FURL])], [], planned_seeds=[0, 1, 2])
+
+
+#: The SHA-256 of the Table 5.12 analysis plan as registered in commit 0154dd6, before its runs.
+REGISTERED_PLAN = "c0aebeb5b2ca94095ced7ce33c15d3c773bc450d45393d80f79f1e2b535fc170"
+
+
+def test_the_registered_analysis_plan_is_unedited():
+    """The plan fixes the analysis before the runs: an edit after them would let the data choose
+    it. Amendments go in a file of their own, dated, beside it."""
+    plan = Path(__file__).resolve().parents[1] / "docs/results/table_5_12/analysis_plan.md"
+    assert hashlib.sha256(plan.read_bytes()).hexdigest() == REGISTERED_PLAN
