@@ -313,6 +313,8 @@ def main(cfg: DictConfig) -> None:
         return
     # A sweep job trains in a process of its own, so that whatever ends it is reported at once,
     # naming the job and its run, while the other jobs go on (temporal_torchrl.runs.sweep_job).
+    # A bad config is refused here first, before a process or a run directory is made for it.
+    validate_recipe_config(cfg)
     cfg = sweep_job_config(cfg, hydra_config)
     if cfg is not None:
         job = f"#{hydra_config.job.num} ({' '.join(hydra_config.overrides.task)})"

@@ -109,6 +109,17 @@ def test_the_example_sweep_runs_and_reports(tmp_path):
     assert (out / "success_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_sweep_with_a_key_nothing_reads_stops_before_any_job(tmp_path):
+    sweep = tmp_path / "sweep"
+    result = subprocess.run(
+        [sys.executable, str(RECIPES / "sac_temporal.py"), "-m", f"hydra.sweep.dir={sweep}",
+         *QUICK, "env.seed=0,1", "+train.epsiodes=3"],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode != 0
+    assert "config key 'train.epsiodes' is not declared" in result.stderr
+    assert "sweep job" not in result.stderr and not list(sweep.rglob("config.json"))
+
+
 @pytest.mark.slow
 def test_a_sweep_over_a_reward_option_makes_a_run_per_value(tmp_path):
     """``-m +reward.options.sharpness=2,4`` with the extending guide's d_sharp: the two jobs
