@@ -33,7 +33,8 @@ and writes into ``--out``:
   ``report.md`` leads with it;
 - ``primary_claim.md``/``.csv`` with ``--primary X Y`` (and ``--secondary``): a registered
   plan's test of X against Y over the tasks (:mod:`temporal_torchrl.reports.primary_claim`),
-  on the ``--planned-seeds`` only;
+  on the ``--planned-seeds`` only (which the thesis-table page, the aggregates and the
+  comparisons then keep to as well);
 - ``runs.csv``: every run with its episodes and metrics (or why it has none yet);
 - ``success_curves.png``: running-average success (window 150) per task and configuration;
 - ``evaluation.md``/``.csv`` and ``evaluation_curves.png``, only when some runs evaluated their
@@ -176,8 +177,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="a secondary hypothesis, tested alike outside Holm's family")
     parser.add_argument("--planned-seeds", type=int, nargs="+", default=None, metavar="SEED",
                         help="the seeds a plan fixed: runs of other seeds were added after "
-                             "looking, and the --thesis-table page and the primary claim leave "
-                             "them out, naming them (default: every seed; the claim: 0 1 2 3)")
+                             "looking, and the --thesis-table page, the primary claim, the "
+                             "rliable aggregates and the per-task comparisons leave them out "
+                             "(the per-metric tables keep them; default: every seed; the claim: "
+                             "0 1 2 3)")
     parser.add_argument("--thesis-table", default=None, metavar="NUMBER",
                         help="lay the runs out as this thesis table (e.g. 5.12), ours beside "
                              "the thesis, and lead the report with it")
@@ -281,7 +284,11 @@ def main(argv: list[str] | None = None) -> None:
                                     CSV_COLUMNS))
     write_csv(args.out / "runs.csv", run_rows(groups, args.dirs), RUN_COLUMNS)
 
-    reliable = [build_reliable_table(groups, metric, baseline=baseline, reps=args.bootstrap,
+    # The intervals and the comparisons are statistics a plan fixes: on its seeds only.
+    planned = groups if args.planned_seeds is None else [
+        group.with_seeds(args.planned_seeds) for group in groups
+        if any(run.seed in args.planned_seeds for run in group.runs)]
+    reliable = [build_reliable_table(planned, metric, baseline=baseline, reps=args.bootstrap,
                                      seed=args.seed, pairs=[tuple(pair) for pair in args.compare])
                 for metric in METRICS]
     ras_reliable = reliable[list(METRICS).index("ras")]

@@ -136,3 +136,17 @@ def test_the_registered_analysis_plan_is_unedited():
     it. Amendments go in a file of their own, dated, beside it."""
     plan = Path(__file__).resolve().parents[1] / "docs/results/table_5_12/analysis_plan.md"
     assert hashlib.sha256(plan.read_bytes()).hexdigest() == REGISTERED_PLAN
+
+
+def test_planned_seeds_keep_the_aggregates_and_comparisons_to_them(runs, tmp_path):
+    out = tmp_path / "out"
+    report.main([str(runs), "--out", str(out), "--bootstrap", "100",
+                 "--compare", LABELS[BEST], LABELS[SAC], "--planned-seeds", "0", "1"])
+    with (out / "aggregates.csv").open() as file:
+        scored = {row["configuration"]: row["runs_scored"] for row in csv.DictReader(file)
+                  if row["metric"] == "ras"}
+    assert scored[LABELS[SAC]] == "4"  # seeds 0 and 1 on two tasks; seeds 2 and 4 left out
+    with (out / "ras.csv").open() as file:
+        sac = {row["task"]: row["n"] for row in csv.DictReader(file)
+               if row["configuration"] == LABELS[SAC] and row["task"] != "Average"}
+    assert sac == {"drawer-open": "3", "window-close": "3"}  # the per-metric table keeps all
