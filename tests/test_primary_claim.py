@@ -15,6 +15,7 @@ from helpers import make_run
 
 from temporal_torchrl.reports import group_runs
 from temporal_torchrl.reports.primary_claim import build_primary_claim
+from temporal_torchrl.reports.thesis_table import build_thesis_table
 from temporal_torchrl.runs import find_runs
 
 SAC, FURL, BEST = (("preset=sac", "protocol=stage2"), ("preset=furl_rho1", "protocol=stage2"),
@@ -150,3 +151,11 @@ def test_planned_seeds_keep_the_aggregates_and_comparisons_to_them(runs, tmp_pat
         sac = {row["task"]: row["n"] for row in csv.DictReader(file)
                if row["configuration"] == LABELS[SAC] and row["task"] != "Average"}
     assert sac == {"drawer-open": "3", "window-close": "3"}  # the per-metric table keeps all
+
+
+def test_a_cell_short_of_its_planned_seeds_is_shown_not_judged(runs):
+    groups = group_runs(find_runs([runs]))
+    page = build_thesis_table(groups, "5.12", planned_seeds=[0, 1, 2])
+    assert ("drawer-open", "SAC") in page.cells  # seeds 0 and 1 of 0-2: shown
+    assert list(page.comparisons) == [("window-close", "SAC")]  # the one cell with seed 2 too
+    assert build_thesis_table(groups, "5.12", planned_seeds=[0, 1]).comparisons

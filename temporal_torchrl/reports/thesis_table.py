@@ -113,7 +113,7 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str,
                        planned_seeds: Sequence[int] | None = None) -> ThesisTablePage:
     """The page of the thesis's table ``number`` for ``groups`` (module doc); with
     ``planned_seeds``, on the runs of those seeds only, the others named as added after
-    looking."""
+    looking, and a cell compared with the thesis only once it has all of them."""
     table = find_table(number)
     after_looking = ()
     if planned_seeds is not None:
@@ -134,8 +134,13 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str,
     by_key = {column.key: column for column in columns}
 
     def comparable(task: str, column: ThesisColumn) -> bool:
+        """A cell with a seed error; with a plan, one with every planned seed (a cell still
+        running is shown, not judged)."""
         cell = cells.get((task, column.key))
-        return cell is not None and cell.comparable_with(table.rows[task][column.index])
+        if cell is None or not cell.comparable_with(table.rows[task][column.index]):
+            return False
+        return planned_seeds is None or set(planned_seeds) <= {
+            value.run.seed for value in cell.runs}
 
     compared = [(task, key) for task, key in cells if comparable(task, by_key[key])]
     comparisons = {}
