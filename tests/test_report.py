@@ -651,3 +651,19 @@ def test_figure_run_loads_every_reward_setting(tmp_path, overrides):
         capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     assert (out / "reward_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_keys_a_run_never_read_do_not_split_a_configuration(tmp_path):
+    """SAC renders nothing, so its encoder and frame size are unread; a run without evaluations
+    reads no eval.*; a run older than env.goal ran the fixed goal."""
+    make_run(tmp_path, "a", SEED0, "preset=sac", "protocol=stage2", "env.seed=0")
+    make_run(tmp_path, "b", SEED1, "preset=sac", "protocol=stage2", "env.seed=1",
+             "encoder.name=metaworld_small", "env.image_size=64", "eval.episodes=3")
+    old = make_run(tmp_path, "c", SEED1, "preset=sac", "protocol=stage2", "env.seed=2")
+    config = json.loads((old / "config.json").read_text())
+    del config["env"]["goal"], config["eval"]
+    (old / "config.json").write_text(json.dumps(config))
+    make_run(tmp_path, "d", SEED0, *FURL, "env.seed=0", "encoder.name=metaworld_small")
+    make_run(tmp_path, "e", SEED1, *FURL, "env.seed=1")  # a VLM run reads its encoder
+    groups = group_runs(find_runs([tmp_path]))
+    assert sorted(len(group.runs) for group in groups) == [1, 1, 3]

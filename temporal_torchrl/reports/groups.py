@@ -32,6 +32,7 @@ from temporal_torchrl.runs.layout import (
     protocol_name,
 )
 from temporal_torchrl.runs.readers import RUN_KEYS, Run
+from temporal_torchrl.runs.resume import BEFORE_THE_KEY, FRAME_KEYS
 
 #: Config keys that do not make two runs different configurations: those about the process
 #: that ran a run (where it wrote, whether it resumed, when it stopped, its progress bar and
@@ -51,13 +52,23 @@ def is_process_key(key: str) -> bool:
 
 
 def configuration_settings(run: Run) -> dict[str, Any]:
-    """The run's flattened config without the seed, the task, the process keys and empty groups
-    (``reward.options: {}`` says what a run older than the key says by lacking it), its reward
+    """The run's flattened config without the seed, the task, the process keys, empty groups
+    (``reward.options: {}`` says what a run older than the key says by lacking it) and the keys
+    nothing read (``eval.*`` without evaluations; the frames' and encoder's keys without a VLM
+    reward, since such a run renders nothing), a key it predates at what it meant then
+    (``env.goal: fixed``), its reward
     options spelled as now (``reward.window: 8``, which runs saved before the options held,
     says what a run saved since says by ``reward.window: null``:
     :func:`~temporal_torchrl.rewards.config.with_moved_options`)."""
-    return {key: value for key, value in flatten(with_moved_options(run.config)).items()
-            if key not in RUN_KEYS and not is_process_key(key) and value != {}}
+    settings = {key: value for key, value in flatten(with_moved_options(run.config)).items()
+                if key not in RUN_KEYS and not is_process_key(key) and value != {}}
+    for key, meant in BEFORE_THE_KEY.items():  # a run older than the key meant this
+        settings.setdefault(key, meant)
+    unread = [key for key in settings if key.startswith("eval.")] \
+        if settings.get("eval.every") is None else []
+    if not has_vlm_reward(settings.get("reward.positional"), settings.get("reward.directional")):
+        unread += [key for key in settings if key.startswith(FRAME_KEYS)]
+    return {key: value for key, value in settings.items() if key not in unread}
 
 
 def _rho(value: float) -> str:

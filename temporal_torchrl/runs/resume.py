@@ -178,8 +178,9 @@ def resumed_config(cfg: DictConfig, run_dir: Path,
 #: frames and the encoder when the receiving run embeds them.
 _LAYOUT_KEYS = ("env.task", "env.seed", "env.goal")
 #: What a key a source run's config.json lacks meant then (runs from before the key existed).
-_BEFORE_THE_KEY = {"env.goal": defaults.FIXED_GOAL}
-_FRAME_KEYS = ("env.image_size", "env.camera", "env.fast_render", "encoder.name",
+BEFORE_THE_KEY = {"env.goal": defaults.FIXED_GOAL}
+#: What makes a run's frames and their embeddings: unread by a run without a VLM reward.
+FRAME_KEYS = ("env.image_size", "env.camera", "env.fast_render", "encoder.name",
                "encoder.checkpoint", "encoder.options")
 
 
@@ -188,13 +189,13 @@ def check_positives_source(cfg: DictConfig, source_config: dict[str, Any]) -> No
     positives with this run's task, layout and, when this run has a VLM reward, frames and
     encoder."""
     source = OmegaConf.create(source_config)
-    keys = _LAYOUT_KEYS + (_FRAME_KEYS if uses_vlm_reward(cfg) else ())
+    keys = _LAYOUT_KEYS + (FRAME_KEYS if uses_vlm_reward(cfg) else ())
     if uses_vlm_reward(cfg) and not uses_vlm_reward(source):
         raise ValueError(f"config train.positives_from={cfg.train.positives_from!r} is a run "
                          "without a VLM reward: its positives carry no embeddings. Take them "
                          "from a run with this run's encoder.")
     for key in keys:
-        theirs = OmegaConf.select(source, key, default=_BEFORE_THE_KEY.get(key))
+        theirs = OmegaConf.select(source, key, default=BEFORE_THE_KEY.get(key))
         ours = OmegaConf.select(cfg, key)
         if isinstance(theirs, DictConfig):
             theirs, ours = OmegaConf.to_container(theirs), OmegaConf.to_container(ours)
