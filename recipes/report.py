@@ -73,7 +73,11 @@ from temporal_torchrl.reports.evaluation import (
     evaluation_markdown,
     evaluation_rows,
 )
-from temporal_torchrl.reports.groups import configuration_name, configuration_settings
+from temporal_torchrl.reports.groups import (
+    configuration_name,
+    configuration_settings,
+    planned_runs,
+)
 from temporal_torchrl.reports.plots import (
     configuration_colours,
     plot_aggregate_intervals,
@@ -285,9 +289,8 @@ def main(argv: list[str] | None = None) -> None:
     write_csv(args.out / "runs.csv", run_rows(groups, args.dirs), RUN_COLUMNS)
 
     # The intervals and the comparisons are statistics a plan fixes: on its seeds only.
-    planned = groups if args.planned_seeds is None else [
-        group.with_seeds(args.planned_seeds) for group in groups
-        if any(run.seed in args.planned_seeds for run in group.runs)]
+    planned = groups if args.planned_seeds is None else planned_runs(groups,
+                                                                      args.planned_seeds)[0]
     reliable = [build_reliable_table(planned, metric, baseline=baseline, reps=args.bootstrap,
                                      seed=args.seed, pairs=[tuple(pair) for pair in args.compare])
                 for metric in METRICS]

@@ -146,6 +146,17 @@ class RunGroup:
                         tuple(run for run in self.runs if run.seed in kept))
 
 
+def planned_runs(groups: Sequence[RunGroup],
+                 seeds: Iterable[int]) -> tuple[list[RunGroup], tuple[str, ...]]:
+    """``groups`` on a plan's ``seeds`` only (a group left with no run dropped), and the runs
+    left out, as added after looking: ``"SAC, drawer-open, seed 4"``."""
+    kept = set(seeds)
+    after = tuple(f"{group.label}, {run.task}, seed {run.seed}" for group in groups
+                  for run in group.runs if run.seed not in kept)
+    planned = [group.with_seeds(kept) for group in groups]
+    return [group for group in planned if group.runs], after
+
+
 def task_order(task: str) -> tuple[int, str]:
     """Sort key: the thesis's six tasks in its order, then any other task alphabetically."""
     return ((EVALUATION_TASKS.index(task), "") if task in EVALUATION_TASKS

@@ -26,7 +26,7 @@ from temporal_torchrl.reports.aggregate_tests import (
     stratified_bootstrap_interval,
     stratified_permutation_test,
 )
-from temporal_torchrl.reports.groups import RunGroup
+from temporal_torchrl.reports.groups import RunGroup, planned_runs
 from temporal_torchrl.reports.tables import markdown_table
 
 #: The seeds the Table 5.12 plan fixed, when a report names none.
@@ -122,8 +122,7 @@ def build_primary_claim(groups: Sequence[RunGroup], primary: Sequence[tuple[str,
     tests = [replace(each, adjusted_p=adjusted[f"{each.label} vs {each.baseline}"])
              for each in tests]
     tests += [test(pair, False) for pair in secondary]
-    after = tuple(f"{label}, {run.task}, seed {run.seed}" for label in sorted(named)
-                  for run in by_label[label].runs if run.seed not in planned_seeds)
+    _, after = planned_runs([by_label[label] for label in sorted(named)], planned_seeds)
     return PrimaryClaim(tuple(tests), tuple(planned_seeds), permutations, resamples, after)
 
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from temporal_torchrl.reports.aggregate import METRICS, Cell, Metric, make_cell
-from temporal_torchrl.reports.groups import RunGroup
+from temporal_torchrl.reports.groups import RunGroup, planned_runs
 from temporal_torchrl.reports.published import (
     PUBLISHED_ENCODER,
     Configuration,
@@ -117,10 +117,7 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str,
     table = find_table(number)
     after_looking = ()
     if planned_seeds is not None:
-        after_looking = tuple(f"{group.label}, {run.task}, seed {run.seed}" for group in groups
-                              for run in group.runs if run.seed not in planned_seeds)
-        groups = [group.with_seeds(planned_seeds) for group in groups]
-        groups = [group for group in groups if group.runs]
+        groups, after_looking = planned_runs(groups, planned_seeds)
     columns = []
     for index, published in enumerate(table.columns):
         matching = [group for group in groups
