@@ -14,6 +14,7 @@ from torchrl.envs import Compose
 
 from temporal_torchrl.encoders import load_encoder
 from temporal_torchrl.envs import make_env, make_temporal_env, make_temporal_reward
+from temporal_torchrl.params import EnvParams
 from temporal_torchrl.transforms import (
     EmbeddingHistoryTransform,
     EmbeddingTransform,
@@ -38,13 +39,14 @@ def main(argv: list[str] | None = None) -> None:
     encoder = load_encoder(args.encoder)  # or load_encoder("liv", checkpoint="model.pt")
     reward = make_temporal_reward(args.task, encoder, positional="furl", directional="d3",
                                   baseline="generic", rho=1.0, lambda_=4.0, k=5)
-    env = make_temporal_env(args.task, seed=0, encoder=encoder, reward=reward, image_size=64)
+    layout = EnvParams(args.task, seed=0)  # the task's env: layout, 500 steps, 64 px frames
+    env = make_temporal_env(layout, encoder=encoder, reward=reward)
     rollout = env.rollout(args.steps)  # "embedding", "initial_embedding", "previous_embedding"
     # [/canonical]
 
     # [by-hand]
     renders = encoder.input_key == "pixels"  # the state encoder reads observations
-    by_hand = make_env(args.task, seed=0, render=renders, image_size=64).append_transform(Compose(
+    by_hand = make_env(layout, render=renders).append_transform(Compose(
         EmbeddingTransform(encoder),            # "pixels" -> "embedding" (pixels dropped)
         EmbeddingHistoryTransform(k=reward.k),  # -> "initial_embedding", "previous_embedding"
         TemporalRewardTransform(reward),        # -> r_P, r_D, "vlm_reward", total "reward"

@@ -29,6 +29,7 @@ register_reward("p5", progress_since_start, kind="positional")
 def main(argv: list[str] | None = None) -> None:
     from temporal_torchrl.encoders import load_encoder
     from temporal_torchrl.envs import make_temporal_env, make_temporal_reward
+    from temporal_torchrl.params import EnvParams
 
     parser = argparse.ArgumentParser(description="p5 in a composed env")
     parser.add_argument("--task", default="drawer-open")
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> None:
 
     encoder = load_encoder(args.encoder)
     reward = make_temporal_reward(args.task, encoder, positional="p5", directional=None, rho=1.0)
-    env = make_temporal_env(args.task, seed=0, encoder=encoder, reward=reward, image_size=64)
+    env = make_temporal_env(EnvParams(args.task, seed=0), encoder=encoder, reward=reward)
     rollout = env.rollout(args.steps)
     r_p = rollout["next", "positional_reward"].squeeze(-1)
     print("p5 along", args.steps, "random steps:", " ".join(f"{value:+.2f}" for value in r_p))

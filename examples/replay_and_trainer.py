@@ -25,6 +25,7 @@ from temporal_torchrl.envs import (
     make_temporal_env,
     make_temporal_reward,
 )
+from temporal_torchrl.params import EnvParams
 from temporal_torchrl.training import RewardHeadTrainer
 
 
@@ -41,13 +42,13 @@ def main(argv: list[str] | None = None) -> None:
     reward = make_temporal_reward(args.task, encoder, positional="furl", directional="d3",
                                   rho=1.0, lambda_=4.0, k=5)
     renders = encoder.input_key == "pixels"
-    env = make_temporal_env(args.task, seed=0, encoder=encoder, reward=reward, image_size=64,
-                            max_episode_steps=args.steps)
+    layout = EnvParams(args.task, seed=0)      # 64x64 frames of the seed's layout
+    env = make_temporal_env(layout.replace(max_episode_steps=args.steps), encoder=encoder,
+                            reward=reward)
 
     # [buffer]
     buffer = EpisodeReplayBuffer(100_000, reward=reward, batch_size=256)
-    expert = collect_successful_experts(args.task, seed=0, count=1, render=renders,
-                                        image_size=64)[0]
+    expert = collect_successful_experts(layout, count=1, render=renders)[0]
     expert = embed_episode(expert, encoder)     # the env's embeddings, for the expert's states
     buffer.extend(episode_rows(expert))         # one ended episode: T + 1 rows, labelled
     for _ in range(args.episodes):

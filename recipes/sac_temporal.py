@@ -158,7 +158,7 @@ def build(start: RunStart, run_dir: RunDirectory) -> Training:
                           buffer_capacity=buffer.capacity, expert_rows=expert_rows,
                           preloaded=buffer.num_permanent_episodes)
     start.restore(state)
-    print(f"relay exploration: {factories.describe_relay(cfg, relay)}")
+    print(f"relay exploration: {factories.describe_relay(relay)}")
     collector = factories.make_collector(cfg, env, relay.policy,
                                          max(0, cfg.train.random_steps - progress.env_steps),
                                          devices)

@@ -92,8 +92,8 @@ CAMERA = "corner2"
 MAX_EPISODE_STEPS = 500
 #: Shadows, reflections and MSAA off when rendering (about 8x faster on a CPU).
 FAST_RENDER = True
-#: The side of the recipes' rendered frames (the package's small encoder reads 64x64). The
-#: library's render signatures default to 224, CLIP's input size, for an encoder-agnostic call.
+#: The side of the rendered frames (the package's small encoder reads 64x64; render LIV's at
+#: 224 or 256: an encoder refuses frames far smaller than its own).
 IMAGE_SIZE = 64
 #: Preloaded positive episodes of the thesis's protocol stage 2 (section 5.1).
 STAGE2_POSITIVES = 50

@@ -10,8 +10,8 @@ from helpers import RECIPES
 from omegaconf import OmegaConf
 
 from temporal_torchrl import defaults
-from temporal_torchrl.configs.recipe import SharedEnvConfig
 from temporal_torchrl.configs.reward_quality import DatasetConfig
+from temporal_torchrl.params import EnvParams
 from temporal_torchrl.reward_quality import DatasetSpec
 from temporal_torchrl.runs.layout import protocol_name
 
@@ -56,7 +56,7 @@ def test_the_benchmarks_config_and_its_dataset_spec_share_their_defaults():
     """``dataset.*`` and ``env.*``'s render settings default to what ``DatasetSpec`` does, so a
     spec built in code collects the dataset the recipe's default config collects."""
     spec = DatasetSpec("drawer-open")
-    for config in (DatasetConfig(), SharedEnvConfig()):
+    for config in (DatasetConfig(), EnvParams()):
         shared = {field.name for field in dataclasses.fields(config)} & {
             field.name for field in dataclasses.fields(spec)} - {"task", "seed"}
         assert shared, config

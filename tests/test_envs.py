@@ -71,7 +71,9 @@ def test_unknown_camera_is_refused_with_the_valid_cameras():
 
 def test_bad_seed_and_episode_length_are_refused():
     with pytest.raises(ValueError, match="seed"):
-        make_env("push", seed=None)
+        make_env("push", seed=-1)
+    with pytest.raises(ValueError, match="seed"):
+        make_env("push", seed="0")
     with pytest.raises(ValueError, match="max_episode_steps"):
         make_env("push", max_episode_steps=0)
 

@@ -11,6 +11,7 @@ from temporal_torchrl.envs import (
     first_success_index,
     make_env,
 )
+from temporal_torchrl.params import EnvParams
 
 
 @pytest.mark.parametrize("task", EVALUATION_TASKS)
@@ -84,10 +85,10 @@ def test_successful_experts_are_the_first_round_when_it_succeeds():
     """The first round draws the noise of ``collect_expert_episodes`` itself (generator seeded
     by the layout's seed), so the preloaded positives and the benchmark's experts are those
     episodes."""
-    experts = collect_successful_experts("reach", 0, 2)
+    experts = collect_successful_experts("reach", 2)
     plain = collect_expert_episodes("reach", 0, num_episodes=2)
     assert all(torch.equal(a["action"], b["action"]) for a, b in zip(experts, plain, strict=True))
-    assert collect_successful_experts("reach", 0, 0) == []
+    assert collect_successful_experts("reach", 0) == []
 
 
 def test_successful_experts_give_up_after_max_attempts_episodes_per_episode_wanted():
@@ -95,7 +96,8 @@ def test_successful_experts_give_up_after_max_attempts_episodes_per_episode_want
     wanted were tried; then an error says how many succeeded."""
     with pytest.raises(RuntimeError, match=r"door-open \(noise 0.1\) succeeded in only 0 of 4 "
                                            r"episodes, 2 wanted"):
-        collect_successful_experts("door-open", 0, 2, max_episode_steps=4, max_attempts=2)
+        collect_successful_experts(EnvParams("door-open", max_episode_steps=4), 2,
+                                   max_attempts=2)
 
 
 def test_first_success_index():

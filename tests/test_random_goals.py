@@ -18,6 +18,7 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from temporal_torchrl.configs.rules import validate_recipe_config
 from temporal_torchrl.envs import collect_expert_episodes, make_temporal_env
 from temporal_torchrl.envs.metaworld_env import MetaworldEnv, layout_generator
+from temporal_torchrl.params import EnvParams
 from temporal_torchrl.runs import RunDirectory, default_run_dir
 from temporal_torchrl.training.evaluation import PolicyEvaluation
 
@@ -106,8 +107,8 @@ def small_actor(seed: int = 0) -> ProbabilisticActor:
 
 def test_evaluation_is_deterministic_given_the_parameters():
     actor = small_actor()
-    evaluation = PolicyEvaluation("window-close", 0, goal="random", episodes=3,
-                                  max_episode_steps=30)
+    evaluation = PolicyEvaluation(
+        EnvParams("window-close", goal="random", max_episode_steps=30), episodes=3)
     torch.manual_seed(1)
     first = evaluation(actor)
     torch.manual_seed(2)  # no random number is drawn: another generator state changes nothing

@@ -12,9 +12,11 @@ from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torchrl.data import Bounded
 
+from temporal_torchrl.defaults import RELAY_PERIODS
 from temporal_torchrl.objectives import StackedCriticSACLoss
+from temporal_torchrl.params import RelayParams
 from temporal_torchrl.runs import RunDirectory
-from temporal_torchrl.training.relay import RELAY_PERIODS, RelayPolicy, RelaySchedule
+from temporal_torchrl.training.relay import RelayPolicy, RelaySchedule
 
 
 def release_agents(lengths, periods):
@@ -48,14 +50,14 @@ def test_schedule_follows_the_release_rule():
 
 
 def test_schedule_per_env_and_threshold():
-    schedule = RelaySchedule(num_envs=2, periods=(3,), threshold=10)
+    schedule = RelaySchedule(2, RelayParams(periods=[3], threshold=10))
     schedule.advance(ended=[1])  # env 1 starts its second episode: with the relay agent
     assert schedule.relay_mask().tolist() == [False, True]
     schedule.end_if_enough(9)
     assert schedule.active
     schedule.end_if_enough(10)
     assert not schedule.active and not schedule.relay_mask().any()
-    restored = RelaySchedule(num_envs=2, periods=(3,), threshold=10)
+    restored = RelaySchedule(2, RelayParams(periods=[3], threshold=10))
     restored.load_state_dict(schedule.state_dict())
     assert not restored.active and restored.step.tolist() == [1, 0]
 
@@ -67,9 +69,9 @@ def constant_actor(value: float) -> TensorDictModule:
 
 def test_policy_gives_relay_envs_the_noisy_relay_action():
     spec = Bounded(-1.0, 1.0, shape=(4,))
-    schedule = RelaySchedule(num_envs=3, periods=(5,))
+    schedule = RelaySchedule(3, RelayParams(periods=[5], noise=0.2))
     schedule.advance(ended=[1])  # env 1 on the relay agent
-    policy = RelayPolicy(constant_actor(0.25), constant_actor(0.9), schedule, spec, noise=0.2)
+    policy = RelayPolicy(constant_actor(0.25), constant_actor(0.9), schedule, spec)
     actions = policy(TensorDict({"observation": torch.zeros(3, 39)}, [3]))["action"]
     assert torch.equal(actions[[0, 2]], torch.full((2, 4), 0.25))
     assert not torch.equal(actions[1], torch.full((4,), 0.9))  # noised ...

@@ -15,6 +15,7 @@ from torchrl.envs.utils import check_env_specs
 
 from temporal_torchrl.envs import make_env
 from temporal_torchrl.envs.metaworld_env import MetaworldEnv
+from temporal_torchrl.params import EnvParams
 from temporal_torchrl.transforms import RenderTransform
 
 SIZE = 64
@@ -104,9 +105,12 @@ def test_pixels_at_reset_and_every_step_declared_in_the_spec():
     assert not torch.equal(rollout["pixels"][0], rollout["next", "pixels"][-1])
 
 
-def test_default_size_is_224():
+def test_default_size_is_the_env_params_one():
+    """One default frame side for the env and the render transform: EnvParams' (64 px, the
+    shipped encoder's); an encoder that reads larger frames refuses far smaller ones."""
     frame = make_env("push", render=True).reset()["pixels"]
-    assert frame.shape == (224, 224, 3)
+    assert frame.shape == (EnvParams().image_size, EnvParams().image_size, 3) == (64, 64, 3)
+    assert (RenderTransform().height, RenderTransform().width) == (64, 64)
 
 
 def test_camera_is_selectable():

@@ -238,10 +238,11 @@ def test_dataset_is_collected_once_then_read_from_the_cache(tmp_path, monkeypatc
         load_or_collect(spec, load_encoder("state", dim=8, seed=1), tmp_path)
 
 
-@pytest.mark.parametrize("counts", [{"expert_episodes": 1},
-                                    {"random_episodes": 1, "failed_expert_episodes": 1}])
-def test_dataset_spec_refuses_too_few_episodes(counts):
-    with pytest.raises(ValueError, match="at least 2"):
+@pytest.mark.parametrize(("counts", "message"), [
+    ({"expert_episodes": 1}, r"expert_episodes=1; expected an integer >= 2"),
+    ({"random_episodes": 1, "failed_expert_episodes": 1}, "at least 2")])
+def test_dataset_spec_refuses_too_few_episodes(counts, message):
+    with pytest.raises(ValueError, match=message):
         DatasetSpec("push", **counts)
 
 

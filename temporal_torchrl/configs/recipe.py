@@ -4,11 +4,16 @@ This module is the one home of the recipe's settings. ``recipes/config.yaml`` ho
 defaults list (this schema, ``recipe_schema``, first; then the preset and the protocol) and
 Hydra's own settings; the presets and protocols (``recipes/preset``, ``recipes/protocol``) state
 only what they change. Hydra refuses a value of the wrong type as it composes, naming the key;
-the ranges declared here with :func:`~temporal_torchrl.configs.fields.constrained` and the rules
+the ranges declared here with :func:`~temporal_torchrl.fields.constrained` and the rules
 that relate keys or need code (:mod:`temporal_torchrl.configs.rules`) are checked before a run
-does any work. The library's own defaults (the env's, the reward's, relay's, the evaluation's) are
-read from :mod:`temporal_torchrl.defaults`. ``python recipes/sac_temporal.py --cfg job`` prints the
-composed config.
+does any work. ``python recipes/sac_temporal.py --cfg job`` prints the composed config.
+
+The components' parameter objects (:mod:`temporal_torchrl.params`) are nested as they are: ``env``
+is :class:`~temporal_torchrl.params.EnvParams` (with ``num_envs``), ``eval``
+:class:`~temporal_torchrl.params.EvalParams`, and ``train.relay_*`` take their defaults and
+ranges from :class:`~temporal_torchrl.params.RelayParams`'s fields; the recipe hands them to the
+library's constructors as these objects. The reward's defaults are read from
+:mod:`temporal_torchrl.defaults`.
 
 The default run is the whole pipeline offline on a CPU (time and output: README.md): rendering
 at 64x64, the package's own small vision-language encoder (``metaworld_small``, trained with
@@ -16,8 +21,9 @@ LIV's objective; its weights ship in the package), the thesis's best reward (FuR
 4.0, generic baseline) and 5 episodes of 500 steps, 1,000 of them random. The thesis presets
 switch to the LIV encoder at 256x256, 1,000 episodes and 10,000 random steps.
 
-The ``Shared*`` classes hold the keys ``recipes/evaluate_rewards.py`` shares with the training
-recipe (:mod:`temporal_torchrl.configs.reward_quality`), so both state them once.
+``recipes/evaluate_rewards.py`` shares ``env.*`` (:class:`~temporal_torchrl.params.EnvParams`)
+and the ``reward.*`` keys of :class:`SharedRewardConfig` with the training recipe
+(:mod:`temporal_torchrl.configs.reward_quality`), so both state them once.
 """
 
 from __future__ import annotations
@@ -26,7 +32,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from temporal_torchrl import defaults
-from temporal_torchrl.configs.fields import constrained
+from temporal_torchrl.fields import constrained, field_of
+from temporal_torchrl.params import EnvParams, EvalParams, RelayParams
 
 #: ``replay_buffer.embedding_dtype``: the torch dtypes the buffer may store embeddings in.
 EMBEDDING_DTYPES = ("float16", "bfloat16", "float32")
@@ -37,44 +44,11 @@ LOGGER_BACKENDS = ("wandb", "csv", "none")
 
 
 @dataclass
-class SharedEnvConfig:
-    """``env.*`` keys of both recipes: the task, its layout and its rendered frames."""
-
-    #: Any Metaworld MT50 short name; the thesis evaluates six.
-    task: str = "drawer-open"
-    #: The layout (fixed goal) and every random generator of the run.
-    seed: int = constrained(0, ge=0)
-    #: Steps per episode (Metaworld's truncation).
-    max_episode_steps: int = constrained(defaults.MAX_EPISODE_STEPS, ge=1)
-    #: Side of the rendered frames (square); only encoders that read pixels use them.
-    image_size: int = constrained(defaults.IMAGE_SIZE, ge=1)
-    #: The Metaworld camera rendered.
-    camera: str = defaults.CAMERA
-    #: Shadows, reflections and MSAA off (about 8x faster on a CPU); false: Metaworld's look.
-    fast_render: bool = defaults.FAST_RENDER
-
-
-@dataclass
-class EnvConfig(SharedEnvConfig):
-    """``env.*``."""
+class EnvConfig(EnvParams):
+    """``env.*``: :class:`~temporal_torchrl.params.EnvParams` and the copies stepped."""
 
     #: Copies of the task stepped in parallel worker processes (the thesis: 1).
     num_envs: int = constrained(1, ge=1)
-    #: fixed: one layout per run, from env.seed (the thesis) | random: a new layout at every
-    #: reset, from a stream seeded by env.seed (the goal then observable).
-    goal: str = constrained(defaults.GOAL, choices=defaults.GOALS)
-
-
-@dataclass
-class EvalConfig:
-    """``eval.*``: evaluation episodes of the deterministic policy, apart from training (none in
-    the thesis's protocol)."""
-
-    #: Evaluate after every this many training episodes (null: never).
-    every: int | None = constrained(None, ge=1)
-    #: Episodes per evaluation: random goals, each on its own held-out layout (the same ones at
-    #: every evaluation); fixed goals, on the run's layout.
-    episodes: int = constrained(defaults.EVAL_EPISODES, ge=1)
 
 
 @dataclass
@@ -212,11 +186,11 @@ class TrainConfig:
     #: states; needs finetuned heads.
     relay: bool = True
     #: Switch agents every period steps, one period drawn per episode.
-    relay_periods: list[int] = constrained(list(defaults.RELAY_PERIODS), ge=1, nonempty=True)
+    relay_periods: list[int] = field_of(RelayParams, "periods")
     #: Gaussian noise on the relay agent's actions, times the action bound.
-    relay_noise: float = constrained(defaults.RELAY_NOISE, ge=0)
+    relay_noise: float = field_of(RelayParams, "noise")
     #: Positive states that end relay (protocol stage 2's 50 preloaded: it never starts).
-    relay_threshold: int = constrained(defaults.RELAY_THRESHOLD, ge=0)
+    relay_threshold: int = field_of(RelayParams, "threshold")
     #: Uniform random actions first (the thesis: 10,000).
     random_steps: int = constrained(1000, ge=0)
     #: SAC updates per env step after the warm-up, at any env.num_envs (the thesis: 1);
@@ -281,7 +255,7 @@ class RecipeConfig:
     sac: SACConfig = field(default_factory=SACConfig)
     replay_buffer: ReplayBufferConfig = field(default_factory=ReplayBufferConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
-    eval: EvalConfig = field(default_factory=EvalConfig)
+    eval: EvalParams = field(default_factory=EvalParams)
     compile: CompileConfig = field(default_factory=CompileConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     #: The run directory; null:

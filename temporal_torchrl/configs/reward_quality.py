@@ -6,9 +6,9 @@ training recipe's (:mod:`temporal_torchrl.configs.recipe`, with its defaults and
 for the keys that take several values here: ``env.task`` a task name or a list of them (one
 table per task and a summary), ``reward.positional`` and ``reward.directional`` a variant or a
 list of variants, every one listed scored (each checked by
-:mod:`temporal_torchrl.configs.rules`). ``dataset.*``'s defaults are
-:class:`~temporal_torchrl.reward_quality.DatasetSpec`'s, both read from
-:mod:`temporal_torchrl.defaults`.
+:mod:`temporal_torchrl.configs.rules`). ``dataset.*`` nests
+:class:`~temporal_torchrl.params.DatasetParams`, which
+:class:`~temporal_torchrl.reward_quality.DatasetSpec` holds beside the env's settings.
 """
 
 from __future__ import annotations
@@ -16,16 +16,17 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from temporal_torchrl import defaults
-from temporal_torchrl.configs.fields import constrained
-from temporal_torchrl.configs.recipe import EncoderConfig, SharedEnvConfig, SharedRewardConfig
+from temporal_torchrl.configs.recipe import EncoderConfig, SharedRewardConfig
+from temporal_torchrl.fields import constrained
+from temporal_torchrl.params import DatasetParams, EnvParams
 
 
 @dataclass
-class RewardQualityEnvConfig(SharedEnvConfig):
-    """``env.*``; ``task`` may be a list of task names (one table per task). ``seed`` also
-    draws the held-out split, and ``max_episode_steps`` is the failed episodes' length (the
-    experts get 500 steps to succeed)."""
+class RewardQualityEnvConfig(EnvParams):
+    """``env.*``: :class:`~temporal_torchrl.params.EnvParams`; ``task`` may be a list of task
+    names (one table per task). ``seed`` also draws the held-out split, ``max_episode_steps``
+    is the failed episodes' length (the experts get 500 steps to succeed), and ``goal`` is
+    ``fixed``: the episodes are scored on the run's layout (the rules refuse ``random``)."""
 
     #: A Metaworld MT50 short name, or a list of them.
     task: Any = "drawer-open"
@@ -51,25 +52,10 @@ class RewardQualityRewardConfig(SharedRewardConfig):
 
 
 @dataclass
-class DatasetConfig:
-    """``dataset.*``: the scored episodes (at least 2 failed episodes of one kind: the rules)."""
+class DatasetConfig(DatasetParams):
+    """``dataset.*``: :class:`~temporal_torchrl.params.DatasetParams` (at least 2 failed
+    episodes of one kind: the rules), the split and the cache."""
 
-    #: Successful scripted-expert episodes (the positives).
-    expert_episodes: int = constrained(defaults.DATASET_EXPERT_EPISODES, ge=2)
-    #: Failed episodes of uniform random actions.
-    random_episodes: int = constrained(defaults.DATASET_RANDOM_EPISODES, ge=0)
-    #: Failed episodes of the expert with a large action noise.
-    failed_expert_episodes: int = constrained(defaults.DATASET_FAILED_EXPERT_EPISODES,
-                                              ge=0)
-    #: The successful experts' action noise (the stage-2 preloaded positives').
-    expert_noise: float = constrained(defaults.EXPERT_NOISE, ge=0)
-    #: As ``train.expert_steps_after_success``.
-    expert_steps_after_success: int | None = constrained(defaults.EXPERT_STEPS_AFTER_SUCCESS,
-                                                         ge=0)
-    #: The failed experts' noise; doubled while most of their episodes still succeed.
-    failure_noise: float = constrained(defaults.DATASET_FAILURE_NOISE, gt=0)
-    #: Episodes tried per episode wanted, for each kind, before giving up.
-    max_attempts: int = constrained(defaults.DATASET_MAX_ATTEMPTS, ge=1)
     #: Of each kind's episodes, the fraction held out for scoring.
     held_out_fraction: float = constrained(0.33, gt=0, lt=1)
     #: Where collected episodes are cached; null: collect every time.

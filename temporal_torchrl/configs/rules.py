@@ -28,11 +28,12 @@ import torch
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from temporal_torchrl.configs.fields import CONSTRAINT
+from temporal_torchrl import defaults
 from temporal_torchrl.configs.recipe import RecipeConfig
 from temporal_torchrl.configs.reward_quality import RewardQualityConfig
 from temporal_torchrl.encoders import ENCODERS
 from temporal_torchrl.envs import TASKS, baseline_text
+from temporal_torchrl.fields import CONSTRAINT
 from temporal_torchrl.rewards import DIRECTIONAL, POSITIONAL
 from temporal_torchrl.rewards.config import (
     DEPRECATED_KEYS,
@@ -110,7 +111,7 @@ def typed(cfg: DictConfig, schema: type) -> DictConfig:
 
 def check_constraints(cfg: DictConfig, schema: type, prefix: str = "") -> None:
     """Every key's range or choices, as ``schema``'s
-    :func:`~temporal_torchrl.configs.fields.constrained` fields declare them (for a list, each
+    :func:`~temporal_torchrl.fields.constrained` fields declare them (for a list, each
     item's); groups are checked key by key."""
     hints = typing.get_type_hints(schema)
     for spec in dataclasses.fields(schema):
@@ -404,6 +405,10 @@ def validate_reward_quality_config(cfg: DictConfig) -> DictConfig:
                        "random_episodes >= 2 or failed_expert_episodes >= 2 (the split holds out "
                        "episodes of each kind, and a kind needs 2 to appear in both the training "
                        "and the held-out part)")
+    if cfg.env.goal != defaults.FIXED_GOAL:
+        raise _invalid("env.goal", cfg.env.goal,
+                       f"{defaults.FIXED_GOAL}: the benchmark scores episodes on the seed's "
+                       "layout (random goals are a training setting)")
     for task in tasks:
         _check_baseline(task, cfg.reward.baseline)
     _device(cfg, "encoder.device")

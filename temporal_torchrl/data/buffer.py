@@ -73,7 +73,12 @@ from temporal_torchrl.data.samplers import FinetuningSampler, TransitionSampler
 from temporal_torchrl.data.storage import EpisodeStorage
 from temporal_torchrl.data.writer import EpisodeWriter
 from temporal_torchrl.defaults import GAP, LABEL_WINDOW
-from temporal_torchrl.rewards.temporal import TemporalReward, renamed_k, resolve_k
+from temporal_torchrl.rewards.temporal import (
+    TemporalReward,
+    renamed_k,
+    resolve_k,
+    resolve_window,
+)
 
 
 class EpisodeReplayBuffer(ReplayBuffer):
@@ -93,7 +98,8 @@ class EpisodeReplayBuffer(ReplayBuffer):
             another s_{t-k} than the env wrote). Without a reward, default
             :data:`~temporal_torchrl.defaults.K`.
         window_length: K (>= 2): batches also carry ``"embedding_window"``, the last K
-            embeddings of each state (the reward's ``window_length``; None: no window).
+            embeddings of each state (None: no window). With a ``reward`` leave it out, as k:
+            it is the reward's ``window_length``, and a different value is refused.
         label_window, gap: the finetuning sampler's (:class:`FinetuningSampler`).
         permanent_episodes: how many of the first inserted episodes are never overwritten
             (stage 2's preloaded experts).
@@ -121,6 +127,7 @@ class EpisodeReplayBuffer(ReplayBuffer):
             raise ValueError(f"capacity={capacity} must be >= 2 rows (one episode of one step).")
         k = resolve_k(renamed_k(k, history, "EpisodeReplayBuffer"), reward,
                       "EpisodeReplayBuffer")
+        window_length = resolve_window(window_length, reward, "EpisodeReplayBuffer")
         storage = EpisodeStorage(capacity, device=device)
         writer = EpisodeWriter(permanent_episodes)
         transforms = [TransitionLayout(window_length, batch_device)]

@@ -18,19 +18,20 @@ from torchrl.envs.utils import step_mdp
 from temporal_torchrl import defaults
 from temporal_torchrl.envs.metaworld_env import make_env
 from temporal_torchrl.envs.tasks import TaskSpec, get_task
+from temporal_torchrl.params import EnvParams, env_params
 
 _GOAL_SLICE = slice(36, 39)
 #: A retry round's noise generator is seeded with seed + this * round (round 0: ``seed``).
 _RETRY_SEED = 1_000
 
 
-def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: int = 1,
-                            noise: float = defaults.EXPERT_NOISE, render: bool = False,
-                            image_size: int = 224, camera: str = defaults.CAMERA,
-                            fast_render: bool = defaults.FAST_RENDER,
+def collect_expert_episodes(env: str | TaskSpec | EnvParams, seed: int | None = None,
+                            num_episodes: int = 1, noise: float = defaults.EXPERT_NOISE,
+                            render: bool = False, image_size: int | None = None,
+                            camera: str | None = None, fast_render: bool | None = None,
                             steps_after_success: int | None = defaults.EXPERT_STEPS_AFTER_SUCCESS,
-                            max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
-                            generator_seed: int | None = None, goal: str = defaults.GOAL,
+                            max_episode_steps: int | None = None,
+                            generator_seed: int | None = None, goal: str | None = None,
                             stream_index: int = 0) -> list[TensorDict]:
     """Run Metaworld's scripted policy on the task (fixed goal and goal-hidden by default).
 
@@ -47,19 +48,20 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
     ``max_episode_steps`` and ends truncated, as any env episode does.
 
     Args:
-        task: short task name.
-        seed: the layout, as in :func:`make_env` (use the training run's seed).
+        env: the training run's :class:`~temporal_torchrl.params.EnvParams` (its layout, frames
+            and goal setting, so the frames match the training frames), or a task name.
+        seed, image_size, camera, fast_render, max_episode_steps, goal: override ``env``'s, as
+            in :func:`make_env`; ``max_episode_steps`` is the length of an episode with no
+            success.
         num_episodes: number of episodes.
         noise: standard deviation of the action noise.
-        render, image_size, camera, fast_render: as in :func:`make_env`; pass the training
-            settings so the frames match the training frames.
+        render: render ``"pixels"`` (:func:`make_env`).
         steps_after_success: steps kept after the first success; ``None`` keeps the whole
             episode.
-        max_episode_steps: episode length when no success happens.
-        generator_seed: seed of the noise generator; ``None`` derives it from ``seed``, so the
+        generator_seed: seed of the noise generator; ``None`` derives it from the seed, so the
             same call returns the same episodes.
-        goal: ``"fixed"`` (the layout ``seed``) or ``"random"``: each episode on a new layout
-            from the seed's ``"experts"`` stream, ``stream_index`` (of
+        stream_index: with ``goal="random"`` each episode is on a new layout from the seed's
+            ``"experts"`` stream, this index of it (of
             :func:`~temporal_torchrl.envs.metaworld_env.layout_generator`), never the
             training's or the evaluation's layouts.
 
@@ -73,18 +75,19 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
         >>> bool(episode["next", "success"].any()), len(episode) == first_success_index(episode) + 6
         (True, True)
     """
-    spec = get_task(task)
+    params = env_params(env.name if isinstance(env, TaskSpec) else env, seed,
+                        image_size=image_size, camera=camera, fast_render=fast_render,
+                        max_episode_steps=max_episode_steps, goal=goal)
+    spec = get_task(params.task)
     if num_episodes < 0 or noise < 0 or (steps_after_success or 0) < 0:
         raise ValueError(
             f"num_episodes={num_episodes}, noise={noise}, steps_after_success="
             f"{steps_after_success}: all three must be non-negative (steps_after_success may "
             "also be None, for whole episodes)."
         )
-    env = make_env(spec, seed, render=render, image_size=image_size, camera=camera,
-                   fast_render=fast_render, max_episode_steps=max_episode_steps, goal=goal,
-                   stream="experts", stream_index=stream_index)
+    env = make_env(params, render=render, stream="experts", stream_index=stream_index)
     base_env = getattr(env, "base_env", env)
-    rng = np.random.default_rng(seed if generator_seed is None else generator_seed)
+    rng = np.random.default_rng(params.seed if generator_seed is None else generator_seed)
     episodes = []
     try:
         for _ in range(num_episodes):
@@ -92,7 +95,7 @@ def collect_expert_episodes(task: str | TaskSpec, seed: int = 0, num_episodes: i
             tensordict = env.reset()
             true_goal = base_env.goal_position  # read after the reset that drew the layout
             steps, first_success = [], None
-            for t in range(max_episode_steps):
+            for t in range(params.max_episode_steps):
                 observation = tensordict["observation"].numpy().astype(np.float64)
                 observation[_GOAL_SLICE] = true_goal
                 with warnings.catch_warnings():
@@ -139,39 +142,37 @@ def first_success_index(episode: TensorDict) -> int:
 
 
 def collect_successful_experts(
-        task: str, seed: int, count: int, *, noise: float = defaults.EXPERT_NOISE,
-        render: bool = False, image_size: int = 224, camera: str = defaults.CAMERA,
-        fast_render: bool = defaults.FAST_RENDER,
-        max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
+        env: str | EnvParams, count: int, *, noise: float = defaults.EXPERT_NOISE,
+        render: bool = False,
         steps_after_success: int | None = defaults.EXPERT_STEPS_AFTER_SUCCESS,
-        max_attempts: int = 5, goal: str = defaults.GOAL) -> list[TensorDict]:
-    """``count`` successful scripted-expert episodes of the task's layout ``seed`` (random
+        max_attempts: int = 5) -> list[TensorDict]:
+    """``count`` successful scripted-expert episodes of ``env``'s task and layout (random
     goals: of layouts from the seed's experts stream), the stage-2 preloaded positives and the
     reward-quality benchmark's alike.
 
     Episodes are cut ``steps_after_success`` steps after their first success (None: whole
     episodes). A noisy episode that fails is replaced in the next round, with a new noise seed
     and, for random goals, new layouts; up to ``max_attempts`` episodes are tried per episode
-    wanted. Frames are rendered when ``render`` (pass the training run's render settings),
-    nothing is embedded here.
+    wanted. Frames are rendered when ``render`` (``env`` holds the training run's render
+    settings), nothing is embedded here.
 
     Raises:
         RuntimeError: when fewer than ``count`` of the episodes tried succeed.
     """
+    params = env_params(env)
     episodes: list[TensorDict] = []
     tried = attempt = 0
     while len(episodes) < count:
         if tried >= max_attempts * count:
             raise RuntimeError(
-                f"the scripted expert of {task} (noise {noise}) succeeded in only "
+                f"the scripted expert of {params.task} (noise {noise}) succeeded in only "
                 f"{len(episodes)} of {tried} episodes, {count} wanted: lower the noise or raise "
                 "max_attempts.")
         missing = count - len(episodes)
         batch = collect_expert_episodes(
-            task, seed, num_episodes=missing, noise=noise, render=render, image_size=image_size,
-            camera=camera, fast_render=fast_render, max_episode_steps=max_episode_steps,
+            params, num_episodes=missing, noise=noise, render=render,
             steps_after_success=steps_after_success,
-            generator_seed=None if attempt == 0 else seed + _RETRY_SEED * attempt, goal=goal,
+            generator_seed=None if attempt == 0 else params.seed + _RETRY_SEED * attempt,
             stream_index=attempt)
         episodes += [episode for episode in batch if bool(episode["next", "success"].any())]
         tried, attempt = tried + missing, attempt + 1

@@ -45,6 +45,7 @@ from torchrl.envs import EnvBase, TransformedEnv
 
 from temporal_torchrl import defaults
 from temporal_torchrl.envs.tasks import TaskSpec, get_task
+from temporal_torchrl.params import EnvParams, env_params
 
 _OBSERVATION_DIM = 39
 _ACTION_DIM = 4
@@ -239,29 +240,27 @@ class MetaworldEnv(EnvBase):
         super().close(raise_if_closed=raise_if_closed)
 
 
-def make_env(task: str | TaskSpec, seed: int = 0, *, render: bool = False, image_size: int = 224,
-             camera: str = defaults.CAMERA, fast_render: bool = defaults.FAST_RENDER,
-             goal: str = defaults.GOAL, stream: str = "training", stream_index: int = 0,
-             goal_observable: bool | None = None,
-             max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
+def make_env(env: str | TaskSpec | EnvParams, seed: int | None = None, *, render: bool = False,
+             image_size: int | None = None, camera: str | None = None,
+             fast_render: bool | None = None, goal: str | None = None,
+             max_episode_steps: int | None = None, stream: str = "training",
+             stream_index: int = 0, goal_observable: bool | None = None,
              device: str | torch.device = "cpu") -> EnvBase:
     """A Metaworld task as a TorchRL env, optionally rendering ``"pixels"``.
 
     Args:
-        task: short task name (see :data:`temporal_torchrl.envs.TASKS`).
-        seed: decides the layout, identical on every reset (different seeds, different layouts);
-            with ``goal="random"``, the stream of layouts drawn at each reset.
-        goal, stream, stream_index: fixed or random goals, and the random goals' layout stream
-            (:class:`MetaworldEnv`).
+        env: the env's :class:`~temporal_torchrl.params.EnvParams`, or its task (a short name,
+            see :data:`temporal_torchrl.envs.TASKS`, or its :class:`TaskSpec`) with the other
+            settings at their :class:`~temporal_torchrl.params.EnvParams` defaults.
+        seed, image_size, camera, fast_render, goal, max_episode_steps: override ``env``'s
+            (None: keep it); their meanings are :class:`~temporal_torchrl.params.EnvParams`'s.
+            The seed decides the layout, identical on every reset (random goals: the stream of
+            layouts drawn at each reset).
         render: append a :class:`~temporal_torchrl.transforms.RenderTransform` writing
             ``"pixels"`` (uint8 [image_size, image_size, 3], upright) at reset and every step.
-        image_size: side of the square frame in pixels.
-        camera: Metaworld camera name (``"corner2"`` as in the prior implementations).
-        fast_render: shadows, reflections and MSAA off (about 10x faster on CPU); ``False``
-            renders with Metaworld's default look.
+        stream, stream_index: the random goals' layout stream (:class:`MetaworldEnv`).
         goal_observable: keep the goal in ``observation[36:39]`` (None: hidden for fixed goals,
             observable for random goals).
-        max_episode_steps: episode length (500 in the protocol; shorter for tests).
         device: device of the output tensors.
 
     Returns:
@@ -269,22 +268,26 @@ def make_env(task: str | TaskSpec, seed: int = 0, *, render: bool = False, image
 
     Example:
         >>> from temporal_torchrl.envs import make_env
-        >>> env = make_env("drawer-open", seed=0, render=True, image_size=64, max_episode_steps=5)
+        >>> from temporal_torchrl.params import EnvParams
+        >>> env = make_env(EnvParams("drawer-open", max_episode_steps=5), render=True)
         >>> rollout = env.rollout(5)
         >>> rollout["next", "pixels"].shape, rollout["next", "reward"].unique().tolist()
         (torch.Size([5, 64, 64, 3]), [-1.0])
     """
+    params = env_params(env.name if isinstance(env, TaskSpec) else env, seed, image_size=image_size,
+                        camera=camera, fast_render=fast_render, goal=goal,
+                        max_episode_steps=max_episode_steps)
     if render:
         # Imported on use: the transforms package also loads the encoders, which a state-only
         # env does not need.
         from temporal_torchrl.transforms.render import RenderTransform
 
         # Built first so that a bad image size is refused before the simulator is built.
-        transform = RenderTransform(camera=camera, image_size=image_size, fast=fast_render)
-    env = MetaworldEnv(task, seed, goal=goal, stream=stream, stream_index=stream_index,
-                       goal_observable=goal_observable, max_episode_steps=max_episode_steps,
-                       device=device)
+        transform = RenderTransform(**params.render_settings)
+    task_env = MetaworldEnv(params.task, params.seed, goal=params.goal, stream=stream,
+                            stream_index=stream_index, goal_observable=goal_observable,
+                            max_episode_steps=params.max_episode_steps, device=device)
     if not render:
-        return env
-    transform.validate_camera(env.model)
-    return TransformedEnv(env, transform)
+        return task_env
+    transform.validate_camera(task_env.model)
+    return TransformedEnv(task_env, transform)

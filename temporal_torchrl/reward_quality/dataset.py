@@ -45,6 +45,8 @@ from temporal_torchrl.envs import (
     collect_successful_experts,
     make_env,
 )
+from temporal_torchrl.fields import check_fields, field_of
+from temporal_torchrl.params import DatasetParams, EnvParams
 
 #: Episode kinds, positives first.
 EPISODE_KINDS = ("expert", "random", "failed_expert")
@@ -62,7 +64,10 @@ _FAILURE_SEED = 100_000
 
 @dataclass(frozen=True)
 class DatasetSpec:
-    """Everything that decides a dataset's content (and its cache key), encoder aside.
+    """Everything that decides a dataset's content (and its cache key), encoder aside: the
+    env's settings (:class:`~temporal_torchrl.params.EnvParams`'s but the goal: the episodes
+    are on the seed's layout) and the episodes (:class:`~temporal_torchrl.params.DatasetParams`),
+    each field's default and range taken from its parameter object.
 
     Attributes:
         task: Metaworld task short name, e.g. ``"drawer-open"``.
@@ -70,43 +75,58 @@ class DatasetSpec:
         image_size, camera, fast_render: the render settings of the training run.
         max_episode_steps: length of the random and failed episodes (500 in the protocol);
             experts get at least 500 steps to succeed, as in training.
-        expert_episodes: number of successful expert episodes (the positives).
-        random_episodes: number of failed uniform-random episodes.
-        failed_expert_episodes: number of failed noisy-expert episodes.
-        expert_noise: action noise of the positive experts (0.1: the preloaded positives').
-        expert_steps_after_success: experts are cut this many steps after their first success
-            (``None``: whole episodes), as ``train.expert_steps_after_success``.
-        failure_noise: initial action noise of the failed experts.
-        max_attempts: episodes tried per episode wanted, for each kind, before giving up with
-            an error.
+        expert_episodes, random_episodes, failed_expert_episodes, expert_noise,
+            expert_steps_after_success, failure_noise, max_attempts: as in
+            :class:`~temporal_torchrl.params.DatasetParams`.
+
+    Example:
+        >>> from temporal_torchrl.params import DatasetParams, EnvParams
+        >>> spec = DatasetSpec.of(EnvParams("push", seed=2), DatasetParams(expert_episodes=4))
+        >>> spec.task, spec.seed, spec.image_size, spec.expert_episodes, spec.random_episodes
+        ('push', 2, 64, 4, 6)
     """
 
     task: str
-    seed: int = 0
-    image_size: int = defaults.IMAGE_SIZE
-    camera: str = defaults.CAMERA
-    fast_render: bool = defaults.FAST_RENDER
-    max_episode_steps: int = defaults.MAX_EPISODE_STEPS
-    expert_episodes: int = defaults.DATASET_EXPERT_EPISODES
-    random_episodes: int = defaults.DATASET_RANDOM_EPISODES
-    failed_expert_episodes: int = defaults.DATASET_FAILED_EXPERT_EPISODES
-    expert_noise: float = defaults.EXPERT_NOISE
-    expert_steps_after_success: int | None = defaults.EXPERT_STEPS_AFTER_SUCCESS
-    failure_noise: float = defaults.DATASET_FAILURE_NOISE
-    max_attempts: int = defaults.DATASET_MAX_ATTEMPTS
+    seed: int = field_of(EnvParams, "seed")
+    image_size: int = field_of(EnvParams, "image_size")
+    camera: str = field_of(EnvParams, "camera")
+    fast_render: bool = field_of(EnvParams, "fast_render")
+    max_episode_steps: int = field_of(EnvParams, "max_episode_steps")
+    expert_episodes: int = field_of(DatasetParams, "expert_episodes")
+    random_episodes: int = field_of(DatasetParams, "random_episodes")
+    failed_expert_episodes: int = field_of(DatasetParams, "failed_expert_episodes")
+    expert_noise: float = field_of(DatasetParams, "expert_noise")
+    expert_steps_after_success: int | None = field_of(DatasetParams,
+                                                      "expert_steps_after_success")
+    failure_noise: float = field_of(DatasetParams, "failure_noise")
+    max_attempts: int = field_of(DatasetParams, "max_attempts")
+
+    @classmethod
+    def of(cls, env: EnvParams, dataset: DatasetParams) -> DatasetSpec:
+        """The spec of ``env``'s task, layout and frames and ``dataset``'s episodes (a random
+        goal setting is refused: the episodes are scored on the seed's layout)."""
+        if env.goal != defaults.FIXED_GOAL:
+            raise ValueError(f"DatasetSpec: goal={env.goal!r}; the reward-quality episodes are "
+                             f"collected on the seed's layout: use goal={defaults.FIXED_GOAL!r}.")
+        env_fields = {name: getattr(env, name) for name in
+                      ("task", "seed", "image_size", "camera", "fast_render",
+                       "max_episode_steps")}
+        dataset_fields = {spec.name: getattr(dataset, spec.name)
+                          for spec in dataclasses.fields(DatasetParams)}
+        return cls(**env_fields, **dataset_fields)
+
+    @property
+    def env(self) -> EnvParams:
+        """The env the episodes are collected in (on the seed's layout)."""
+        return EnvParams(task=self.task, seed=self.seed, image_size=self.image_size,
+                         camera=self.camera, fast_render=self.fast_render,
+                         max_episode_steps=self.max_episode_steps)
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
             raise ValueError(f"DatasetSpec: task={self.task!r} is not a Metaworld MT50 task; "
                              "expected a short name such as 'drawer-open'.")
-        counts = {"expert_episodes": self.expert_episodes,
-                  "random_episodes": self.random_episodes,
-                  "failed_expert_episodes": self.failed_expert_episodes,
-                  "max_episode_steps": self.max_episode_steps,
-                  "max_attempts": self.max_attempts}
-        for name, value in counts.items():
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"DatasetSpec: {name}={value!r}; expected an integer >= 0.")
+        check_fields(self)
         if self.expert_episodes < 2 or max(self.random_episodes,
                                            self.failed_expert_episodes) < 2:
             raise ValueError(
@@ -114,11 +134,6 @@ class DatasetSpec:
                 f"{self.failed_expert_episodes} failed-expert episodes; expected at least 2 "
                 "experts and 2 random or 2 failed-expert episodes: the split holds out episodes "
                 "of each kind (split_by_episode), and a kind needs 2 to appear on both sides.")
-        if self.max_episode_steps < 1 or self.max_attempts < 1:
-            raise ValueError("DatasetSpec: max_episode_steps and max_attempts must be >= 1.")
-        if not self.expert_noise >= 0 or not self.failure_noise > 0:
-            raise ValueError(f"DatasetSpec: expert_noise={self.expert_noise!r} must be >= 0 and "
-                             f"failure_noise={self.failure_noise!r} > 0.")
 
 
 @dataclass
@@ -213,11 +228,10 @@ def _embedded(episodes: list[TensorDict], encoder: Encoder) -> list[TensorDict]:
 def _collect_experts(spec: DatasetSpec, encoder: Encoder, render: bool) -> list[TensorDict]:
     try:
         experts = collect_successful_experts(
-            spec.task, spec.seed, spec.expert_episodes, noise=spec.expert_noise, render=render,
-            image_size=spec.image_size, camera=spec.camera, fast_render=spec.fast_render,
-            steps_after_success=spec.expert_steps_after_success,
-            max_episode_steps=max(spec.max_episode_steps, defaults.MAX_EPISODE_STEPS),
-            max_attempts=spec.max_attempts)
+            spec.env.replace(max_episode_steps=max(spec.max_episode_steps,
+                                                   defaults.MAX_EPISODE_STEPS)),
+            spec.expert_episodes, noise=spec.expert_noise, render=render,
+            steps_after_success=spec.expert_steps_after_success, max_attempts=spec.max_attempts)
     except RuntimeError as error:
         raise RuntimeError(f"{error} In this benchmark's config: dataset.expert_noise and "
                            "dataset.max_attempts.") from error
@@ -225,9 +239,7 @@ def _collect_experts(spec: DatasetSpec, encoder: Encoder, render: bool) -> list[
 
 
 def _collect_random(spec: DatasetSpec, encoder: Encoder, render: bool) -> list[TensorDict]:
-    env = make_env(spec.task, spec.seed, render=render, image_size=spec.image_size,
-                   camera=spec.camera, fast_render=spec.fast_render,
-                   max_episode_steps=spec.max_episode_steps)
+    env = make_env(spec.env, render=render)
     episodes: list[TensorDict] = []
     attempts = spec.max_attempts * spec.random_episodes
     try:
@@ -259,9 +271,7 @@ def _collect_failed_experts(spec: DatasetSpec, encoder: Encoder, render: bool
         # One episode per call, so no failure beyond the wanted number is rendered; an episode
         # that succeeds is cut at its success (steps_after_success=0) and costs only its steps.
         episode, = collect_expert_episodes(
-            spec.task, spec.seed, num_episodes=1, noise=noise, render=render,
-            image_size=spec.image_size, camera=spec.camera, fast_render=spec.fast_render,
-            steps_after_success=0, max_episode_steps=spec.max_episode_steps,
+            spec.env, num_episodes=1, noise=noise, render=render, steps_after_success=0,
             generator_seed=spec.seed + _FAILURE_SEED + attempt)
         tried_at_noise += 1
         if bool(episode["next", "success"].any()):

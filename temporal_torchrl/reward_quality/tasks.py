@@ -16,6 +16,7 @@ from tensordict import TensorDict
 from temporal_torchrl.data import goal_image_embedding
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.task_reward import task_text_embeddings
+from temporal_torchrl.params import DatasetParams, EnvParams, params_from
 from temporal_torchrl.reward_quality.dataset import (
     DatasetSpec,
     RewardDataset,
@@ -35,17 +36,8 @@ def task_config(cfg: DictConfig, task: str) -> DictConfig:
 def dataset_spec(cfg: DictConfig) -> DatasetSpec:
     """The :class:`~temporal_torchrl.reward_quality.DatasetSpec` of a one-task config's
     ``env.*`` and ``dataset.*``."""
-    return DatasetSpec(
-        task=cfg.env.task, seed=cfg.env.seed, image_size=cfg.env.image_size,
-        camera=cfg.env.camera, fast_render=cfg.env.fast_render,
-        max_episode_steps=cfg.env.max_episode_steps,
-        expert_episodes=cfg.dataset.expert_episodes,
-        random_episodes=cfg.dataset.random_episodes,
-        failed_expert_episodes=cfg.dataset.failed_expert_episodes,
-        expert_noise=float(cfg.dataset.expert_noise),
-        expert_steps_after_success=cfg.dataset.expert_steps_after_success,
-        failure_noise=float(cfg.dataset.failure_noise),
-        max_attempts=cfg.dataset.max_attempts)
+    return DatasetSpec.of(params_from(EnvParams, cfg.env),
+                          params_from(DatasetParams, cfg.dataset))
 
 
 @dataclasses.dataclass(frozen=True)

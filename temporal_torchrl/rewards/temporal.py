@@ -74,6 +74,26 @@ def resolve_k(k: int | None, reward: TemporalReward | None, where: str) -> int:
     return reward.k
 
 
+def resolve_window(window_length: int | None, reward: TemporalReward | None,
+                   where: str) -> int | None:
+    """The window K a part that builds histories beside ``reward`` carries: the reward's own
+    ``window_length`` when there is a reward (None: it reads no window), as :func:`resolve_k`
+    does for k; ``window_length`` without a reward.
+
+    Raises:
+        ValueError: ``window_length`` given and not the reward's; ``where`` names the caller.
+    """
+    if reward is None or window_length is None:
+        return window_length if reward is None else reward.window_length
+    if window_length != reward.window_length:
+        raise ValueError(
+            f"{where}: window_length={window_length!r} but the reward's window_length is "
+            f"{reward.window_length!r}: windows of {window_length} embeddings here against the "
+            f"reward's. Leave window_length out (it is taken from the reward) or build the "
+            f"reward with window={window_length}.")
+    return window_length
+
+
 class TemporalReward(nn.Module):
     """Positional and directional VLM rewards added to the sparse task reward (thesis 4.1):
 

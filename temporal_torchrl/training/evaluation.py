@@ -14,6 +14,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from temporal_torchrl import defaults
 from temporal_torchrl.envs.metaworld_env import MetaworldEnv
+from temporal_torchrl.params import EnvParams, env_params
 
 
 class PolicyEvaluation:
@@ -28,9 +29,9 @@ class PolicyEvaluation:
     torch's).
 
     Args:
-        task, seed, goal: the run's task, seed and goal setting.
-        episodes: episodes per evaluation.
-        max_episode_steps: their length (the run's).
+        env: the run's :class:`~temporal_torchrl.params.EnvParams` (its task, seed, goal
+            setting and episode length; the frames are not rendered), or a task name.
+        episodes: episodes per evaluation (:class:`~temporal_torchrl.params.EvalParams`).
         device: where the policy runs (the env's outputs are put there).
 
     Example:
@@ -38,23 +39,23 @@ class PolicyEvaluation:
         >>> import torch
         >>> still = TensorDictModule(lambda obs: torch.zeros(*obs.shape[:-1], 4),
         ...                          in_keys=["observation"], out_keys=["action"])
-        >>> evaluation = PolicyEvaluation("window-close", 0, goal="random", episodes=2,
-        ...                               max_episode_steps=20)
+        >>> from temporal_torchrl.params import EnvParams
+        >>> env = EnvParams("window-close", goal="random", max_episode_steps=20)
+        >>> evaluation = PolicyEvaluation(env, episodes=2)
         >>> result = evaluation(still)
         >>> result["episodes"], result["success_rate"], result["episode_length"]
         (2, 0.0, 20.0)
     """
 
-    def __init__(self, task: str, seed: int, *, goal: str = defaults.GOAL,
-                 episodes: int = defaults.EVAL_EPISODES,
-                 max_episode_steps: int = defaults.MAX_EPISODE_STEPS,
+    def __init__(self, env: str | EnvParams, episodes: int = defaults.EVAL_EPISODES, *,
                  device: str | torch.device = "cpu") -> None:
         if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
             raise ValueError(f"episodes={episodes!r}; expected a positive integer, the "
                              "evaluation episodes per evaluation (e.g. 10).")
+        params = env_params(env)
         self.episodes = episodes
-        self.env = MetaworldEnv(task, seed, goal=goal, stream="evaluation",
-                                max_episode_steps=max_episode_steps, device=device)
+        self.env = MetaworldEnv(params.task, params.seed, goal=params.goal, stream="evaluation",
+                                max_episode_steps=params.max_episode_steps, device=device)
 
     def __call__(self, policy: TensorDictModuleBase) -> dict[str, float]:
         """Run the evaluation: ``episodes``, ``success_rate`` (success at any step, as the

@@ -37,6 +37,7 @@ from temporal_torchrl.envs import collect_successful_experts, make_temporal_env
 from temporal_torchrl.envs.task_reward import task_text_embeddings
 from temporal_torchrl.modules import ReLU
 from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
+from temporal_torchrl.params import EnvParams, RelayParams, params_from
 from temporal_torchrl.rewards import TemporalReward, reward_from_config
 from temporal_torchrl.runs import RunDirectory, check_positives_source
 from temporal_torchrl.runs.layout import LOGS_DIR
@@ -87,11 +88,8 @@ def make_reward(cfg: DictConfig, encoder: Encoder, devices: Devices) -> Temporal
 
 def make_environment(cfg: DictConfig, encoder: Encoder | None,
                      reward: TemporalReward | None) -> EnvBase:
-    return make_temporal_env(cfg.env.task, cfg.env.seed, encoder=encoder, reward=reward,
-                             image_size=cfg.env.image_size, camera=cfg.env.camera,
-                             fast_render=cfg.env.fast_render,
-                             max_episode_steps=cfg.env.max_episode_steps,
-                             num_envs=cfg.env.num_envs, goal=cfg.env.goal)
+    return make_temporal_env(params_from(EnvParams, cfg.env), encoder=encoder, reward=reward,
+                             num_envs=cfg.env.num_envs)
 
 
 def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
@@ -99,12 +97,11 @@ def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
     """``count`` successful scripted-expert episodes with the run's task, layout (random goals:
     layouts of their own) and frames, embedded by ``encoder`` (given the protocol's full 500
     steps to succeed)."""
+    env = params_from(EnvParams, cfg.env)
     experts = collect_successful_experts(
-        cfg.env.task, cfg.env.seed, count,
-        render=encoder is not None and encoder.input_key == "pixels",
-        image_size=cfg.env.image_size, camera=cfg.env.camera, fast_render=cfg.env.fast_render,
-        max_episode_steps=max(cfg.env.max_episode_steps, defaults.MAX_EPISODE_STEPS),
-        steps_after_success=cfg.train.expert_steps_after_success, goal=cfg.env.goal)
+        env.replace(max_episode_steps=max(env.max_episode_steps, defaults.MAX_EPISODE_STEPS)),
+        count, render=encoder is not None and encoder.input_key == "pixels",
+        steps_after_success=cfg.train.expert_steps_after_success)
     return [embed_episode(episode, encoder) if encoder is not None else episode
             for episode in experts]
 
@@ -157,14 +154,15 @@ def saved_positives(cfg: DictConfig, count: int) -> list[TensorDict]:
     return list(source.positive_episodes(count))
 
 
-def describe_relay(cfg: DictConfig, relay: RelayExploration | NoRelay) -> str:
+def describe_relay(relay: RelayExploration | NoRelay) -> str:
     """One line: whether relay exploration runs, and until when."""
     if isinstance(relay, NoRelay):
         return f"off ({relay.reason})"
     if not relay.schedule.active:
         return f"off (the positives already reach train.relay_threshold={relay.schedule.threshold})"
-    return (f"on until {relay.schedule.threshold:,} positive states (periods "
-            f"{list(cfg.train.relay_periods)}, noise {cfg.train.relay_noise})")
+    params = relay.schedule.params
+    return (f"on until {params.threshold:,} positive states (periods {params.periods}, noise "
+            f"{params.noise})")
 
 
 def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor, positive_states: int,
@@ -177,17 +175,17 @@ def make_relay(cfg: DictConfig, env: EnvBase, actor: ProbabilisticActor, positiv
         return NoRelay(actor, "train.relay=false")
     if not finetune:
         return NoRelay(actor, "no finetuned reward heads to relay for")
-    schedule = RelaySchedule(cfg.env.num_envs, list(cfg.train.relay_periods),
-                             cfg.train.relay_threshold, seed=cfg.env.seed,
-                             active=positive_states < cfg.train.relay_threshold)
+    params = RelayParams(periods=list(cfg.train.relay_periods), noise=cfg.train.relay_noise,
+                         threshold=cfg.train.relay_threshold)
+    schedule = RelaySchedule(cfg.env.num_envs, params, seed=cfg.env.seed,
+                             active=positive_states < params.threshold)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(cfg.env.seed + RELAY_SEED_OFFSET)
         relay_actor, relay_critics = make_sac_agent(cfg, env, devices)
         loss, optimizer = make_sac_loss(cfg, relay_actor, relay_critics,
                                         env.action_spec.shape[-1])
     policy = RelayPolicy(actor, relay_actor, schedule,
-                         env.action_spec_unbatched.to(devices.train),
-                         noise=cfg.train.relay_noise)
+                         env.action_spec_unbatched.to(devices.train))
     return RelayExploration(policy, loss, optimizer,
                             make_sac_update(cfg, loss, optimizer))
 
@@ -218,7 +216,6 @@ def make_replay_buffer(cfg: DictConfig, capacity: int, reward: TemporalReward | 
     the env's history transform takes them (``reward.k`` without a reward)."""
     return EpisodeReplayBuffer(
         capacity, k=cfg.reward.k if reward is None else None,
-        window_length=reward.window_length if reward is not None else None,
         label_window=cfg.reward.label_window, gap=cfg.reward.gap,
         permanent_episodes=cfg.train.preload_positives, reward=reward,
         batch_size=cfg.sac.batch_size, finetuning_batch_size=cfg.reward.batch_size,
@@ -326,9 +323,7 @@ def make_evaluation(cfg: DictConfig, devices: Devices) -> PolicyEvaluation | Non
     run's task, goal setting and episode length, the policy on the train device."""
     if cfg.eval.every is None:
         return None
-    return PolicyEvaluation(cfg.env.task, cfg.env.seed, goal=cfg.env.goal,
-                            episodes=cfg.eval.episodes,
-                            max_episode_steps=cfg.env.max_episode_steps,
+    return PolicyEvaluation(params_from(EnvParams, cfg.env), cfg.eval.episodes,
                             device=devices.train)
 
 

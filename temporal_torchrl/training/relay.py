@@ -27,7 +27,8 @@ so a run's other random streams are the same with relay on or off); :class:`Rela
 collector's policy, choosing per env between the two actors.
 
 Example:
-    >>> schedule = RelaySchedule(num_envs=1, periods=(2,), threshold=10, seed=0)
+    >>> from temporal_torchrl.params import RelayParams
+    >>> schedule = RelaySchedule(1, RelayParams(periods=[2], threshold=10), seed=0)
     >>> masks = []
     >>> for _ in range(5):
     ...     masks.append(bool(schedule.relay_mask()[0]))
@@ -49,7 +50,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.data import TensorSpec
 
-from temporal_torchrl.defaults import RELAY_NOISE, RELAY_PERIODS, RELAY_THRESHOLD
+from temporal_torchrl.params import RelayParams
 
 
 class RelaySchedule:
@@ -57,19 +58,19 @@ class RelaySchedule:
 
     Args:
         num_envs: envs stepped together (each has its own episode clock).
-        periods: the switching periods one is drawn from per episode.
-        threshold: positive states at which relay ends (:meth:`end_if_enough`).
+        params: the switching periods one is drawn from per episode, the positive states at
+            which relay ends (:meth:`end_if_enough`) and the relay agent's action noise
+            (:class:`RelayPolicy`); None: the release's
+            (:class:`~temporal_torchrl.params.RelayParams`' defaults).
         seed: seed of the schedule's own generator (the period draws).
         active: False when relay is off from the start.
     """
 
-    def __init__(self, num_envs: int, periods: Sequence[int] = RELAY_PERIODS,
-                 threshold: int = RELAY_THRESHOLD, seed: int = 0, active: bool = True) -> None:
-        if not periods or not all(isinstance(p, int) and p >= 1 for p in periods):
-            raise ValueError(f"relay periods={list(periods)!r}; expected a non-empty list of "
-                             "integers >= 1 (the release's: [50, 100, 150, 200]).")
-        self.periods = torch.tensor(list(periods))
-        self.threshold = threshold
+    def __init__(self, num_envs: int, params: RelayParams | None = None, *, seed: int = 0,
+                 active: bool = True) -> None:
+        self.params = RelayParams() if params is None else params
+        self.periods = torch.tensor(self.params.periods)
+        self.threshold = self.params.threshold
         self.active = active
         self.generator = torch.Generator().manual_seed(seed)
         self.step = torch.zeros(num_envs, dtype=torch.long)
@@ -129,19 +130,19 @@ class RelaySchedule:
 class RelayPolicy(TensorDictModuleBase):
     """The collector's policy while relay may act: ``actor``'s action, replaced in the envs the
     ``schedule`` gives to the relay agent by ``relay_actor``'s sample plus Gaussian noise
-    (``noise`` times the action bound), clipped to ``action_spec``'s bounds.
+    (the schedule's ``params.noise`` times the action bound), clipped to ``action_spec``'s
+    bounds.
 
     Once the schedule is inactive it is ``actor`` alone, drawing the same random numbers.
     """
 
     def __init__(self, actor: TensorDictModuleBase, relay_actor: TensorDictModuleBase,
-                 schedule: RelaySchedule, action_spec: TensorSpec,
-                 noise: float = RELAY_NOISE) -> None:
+                 schedule: RelaySchedule, action_spec: TensorSpec) -> None:
         super().__init__()
         self.actor = actor
         self.relay_actor = relay_actor
         self.schedule = schedule
-        self.noise = noise
+        self.noise = schedule.params.noise
         self.in_keys = list(actor.in_keys)
         self.out_keys = list(actor.out_keys)
         self.register_buffer("low", action_spec.space.low.clone())

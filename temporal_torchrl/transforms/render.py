@@ -70,7 +70,8 @@ class RenderTransform(Transform):
         torch.Size([3, 64, 64, 3])
     """
 
-    def __init__(self, camera: str = defaults.CAMERA, image_size: int | tuple[int, int] = 224,
+    def __init__(self, camera: str = defaults.CAMERA,
+                 image_size: int | tuple[int, int] = defaults.IMAGE_SIZE,
                  fast: bool = defaults.FAST_RENDER, out_key: str = "pixels") -> None:
         height, width = _parse_image_size(image_size)
         if not isinstance(camera, str) or not camera:
