@@ -14,7 +14,8 @@ library's constructors take and the recipes' config schemas nest (BenchMARL's ma
 Each field's default is written here once (its value read from :mod:`temporal_torchrl.defaults`)
 with its range (:func:`~temporal_torchrl.fields.constrained`), which a config's keys and
 an object built in code are both checked against: ``EnvParams(image_size=0)`` is refused as
-``env.image_size=0`` is. The history's k and window have one route, the reward's
+``env.image_size=0`` is. The recipes build them from their sections
+(``EnvParams.from_section(cfg.env)``, :meth:`Params.from_section`). The history's k and window have one route, the reward's
 (:class:`~temporal_torchrl.rewards.TemporalReward`'s ``k`` and ``window_length``).
 
 Example:
@@ -35,22 +36,34 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any, Self
 
 from temporal_torchrl import defaults
 from temporal_torchrl.fields import check_fields, constrained
 
-Params = TypeVar("Params")
 
+class Params:
+    """What every parameter object does: check its fields when built, build from a config
+    section, copy with changes."""
 
-def params_from(params: type[Params], section: Mapping[str, Any]) -> Params:
-    """A parameter object from a config section (a recipe's ``env``, ``eval``...) holding its
-    fields among others: ``params_from(EnvParams, cfg.env)``."""
-    return params(**{spec.name: section[spec.name] for spec in dataclasses.fields(params)})
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    @classmethod
+    def from_section(cls, section: Mapping[str, Any]) -> Self:
+        """The object of a config section that holds its fields among others (a recipe's
+        ``env``: ``EnvParams.from_section(cfg.env)``)."""
+        return cls(**{spec.name: section[spec.name] for spec in dataclasses.fields(cls)})
+
+    def replace(self, **changes: Any) -> Self:
+        """A copy with ``changes`` (checked as the constructor checks); a ``None`` change keeps
+        the field, so a function's unset keyword overrides nothing."""
+        return dataclasses.replace(self, **{name: value for name, value in changes.items()
+                                            if value is not None})
 
 
 @dataclass
-class EnvParams:
+class EnvParams(Params):
     """A Metaworld task's env: its layout, episode length, goal setting and rendered frames
     (``env.*`` of both recipes)."""
 
@@ -70,15 +83,6 @@ class EnvParams:
     #: reset, from a stream seeded by seed (the goal then observable).
     goal: str = constrained(defaults.GOAL, choices=defaults.GOALS)
 
-    def __post_init__(self) -> None:
-        check_fields(self)
-
-    def replace(self, **changes: Any) -> EnvParams:
-        """A copy with ``changes`` (checked as the constructor checks); a ``None`` change keeps
-        the field, so a function's unset keyword overrides nothing."""
-        return dataclasses.replace(self, **{name: value for name, value in changes.items()
-                                            if value is not None})
-
     @property
     def render_settings(self) -> dict[str, Any]:
         """The render transform's keywords for these frames."""
@@ -94,7 +98,7 @@ def env_params(env: str | EnvParams, seed: int | None = None, **changes: Any) ->
 
 
 @dataclass
-class EvalParams:
+class EvalParams(Params):
     """Evaluation episodes of the deterministic policy, apart from training (``eval.*``; none
     in the thesis's protocol)."""
 
@@ -104,12 +108,9 @@ class EvalParams:
     #: every evaluation); fixed goals, on the run's layout.
     episodes: int = constrained(defaults.EVAL_EPISODES, ge=1)
 
-    def __post_init__(self) -> None:
-        check_fields(self)
-
 
 @dataclass
-class RelayParams:
+class RelayParams(Params):
     """FuRL's relay exploration (the thesis release's values): the recipe's
     ``train.relay_periods``, ``train.relay_noise`` and ``train.relay_threshold``."""
 
@@ -122,11 +123,11 @@ class RelayParams:
 
     def __post_init__(self) -> None:
         self.periods = list(self.periods)
-        check_fields(self)
+        super().__post_init__()
 
 
 @dataclass
-class DatasetParams:
+class DatasetParams(Params):
     """The offline reward-quality benchmark's episodes, besides the env's settings
     (``dataset.*``)."""
 
@@ -146,6 +147,3 @@ class DatasetParams:
     failure_noise: float = constrained(defaults.DATASET_FAILURE_NOISE, gt=0)
     #: Episodes tried per episode wanted, for each kind, before giving up.
     max_attempts: int = constrained(defaults.DATASET_MAX_ATTEMPTS, ge=1)
-
-    def __post_init__(self) -> None:
-        check_fields(self)

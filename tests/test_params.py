@@ -22,7 +22,6 @@ from temporal_torchrl.params import (
     EvalParams,
     RelayParams,
     env_params,
-    params_from,
 )
 from temporal_torchrl.reward_quality import DatasetSpec
 from temporal_torchrl.rewards import TemporalReward
@@ -55,9 +54,9 @@ def test_the_relay_keys_take_their_defaults_and_ranges_from_relay_params():
 def test_a_composed_config_hands_the_library_its_parameter_objects(tmp_path):
     cfg = config(tmp_path, "env.task=door-open", "env.seed=3", "env.goal=random",
                  "eval.episodes=4", "train.relay_noise=0.5")
-    env = params_from(EnvParams, cfg.env)
+    env = EnvParams.from_section(cfg.env)
     assert env == EnvParams("door-open", seed=3, max_episode_steps=20, goal="random")
-    assert params_from(EvalParams, cfg.eval) == EvalParams(episodes=4)
+    assert EvalParams.from_section(cfg.eval) == EvalParams(episodes=4)
 
 
 @pytest.mark.parametrize(("build", "message"), [

@@ -16,7 +16,7 @@ from tensordict import TensorDict
 from temporal_torchrl.data import goal_image_embedding
 from temporal_torchrl.encoders import Encoder
 from temporal_torchrl.envs.task_reward import task_text_embeddings
-from temporal_torchrl.params import DatasetParams, EnvParams, params_from
+from temporal_torchrl.params import DatasetParams, EnvParams
 from temporal_torchrl.reward_quality.dataset import (
     DatasetSpec,
     RewardDataset,
@@ -36,8 +36,8 @@ def task_config(cfg: DictConfig, task: str) -> DictConfig:
 def dataset_spec(cfg: DictConfig) -> DatasetSpec:
     """The :class:`~temporal_torchrl.reward_quality.DatasetSpec` of a one-task config's
     ``env.*`` and ``dataset.*``."""
-    return DatasetSpec.of(params_from(EnvParams, cfg.env),
-                          params_from(DatasetParams, cfg.dataset))
+    return DatasetSpec.of(EnvParams.from_section(cfg.env),
+                          DatasetParams.from_section(cfg.dataset))
 
 
 @dataclasses.dataclass(frozen=True)

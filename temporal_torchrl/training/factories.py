@@ -37,7 +37,7 @@ from temporal_torchrl.envs import collect_successful_experts, make_temporal_env
 from temporal_torchrl.envs.task_reward import task_text_embeddings
 from temporal_torchrl.modules import ReLU
 from temporal_torchrl.objectives import StackedCriticSACLoss, StackedQValueNetwork
-from temporal_torchrl.params import EnvParams, RelayParams, params_from
+from temporal_torchrl.params import EnvParams, RelayParams
 from temporal_torchrl.rewards import TemporalReward, reward_from_config
 from temporal_torchrl.runs import RunDirectory, check_positives_source
 from temporal_torchrl.runs.layout import LOGS_DIR
@@ -88,7 +88,7 @@ def make_reward(cfg: DictConfig, encoder: Encoder, devices: Devices) -> Temporal
 
 def make_environment(cfg: DictConfig, encoder: Encoder | None,
                      reward: TemporalReward | None) -> EnvBase:
-    return make_temporal_env(params_from(EnvParams, cfg.env), encoder=encoder, reward=reward,
+    return make_temporal_env(EnvParams.from_section(cfg.env), encoder=encoder, reward=reward,
                              num_envs=cfg.env.num_envs)
 
 
@@ -97,7 +97,7 @@ def make_expert_episodes(cfg: DictConfig, encoder: Encoder | None,
     """``count`` successful scripted-expert episodes with the run's task, layout (random goals:
     layouts of their own) and frames, embedded by ``encoder`` (given the protocol's full 500
     steps to succeed)."""
-    env = params_from(EnvParams, cfg.env)
+    env = EnvParams.from_section(cfg.env)
     experts = collect_successful_experts(
         env.replace(max_episode_steps=max(env.max_episode_steps, defaults.MAX_EPISODE_STEPS)),
         count, render=encoder is not None and encoder.input_key == "pixels",
@@ -323,7 +323,7 @@ def make_evaluation(cfg: DictConfig, devices: Devices) -> PolicyEvaluation | Non
     run's task, goal setting and episode length, the policy on the train device."""
     if cfg.eval.every is None:
         return None
-    return PolicyEvaluation(params_from(EnvParams, cfg.env), cfg.eval.episodes,
+    return PolicyEvaluation(EnvParams.from_section(cfg.env), cfg.eval.episodes,
                             device=devices.train)
 
 
