@@ -66,7 +66,7 @@ class EmbeddingTransform(Transform):
 
     In an env (``make_env`` from :mod:`temporal_torchrl.envs`)::
 
-        env = make_env("drawer-open", render=True)
+        env = make_env("drawer-open", render=True, image_size=224)  # LIV reads 224 px
         env.append_transform(EmbeddingTransform(load_encoder("liv"), device="cuda",
                                                 autocast_dtype=torch.bfloat16))
     """
