@@ -15,7 +15,8 @@ Each field's default is written here once (its value read from :mod:`temporal_to
 with its range (:func:`~temporal_torchrl.fields.constrained`), which a config's keys and
 an object built in code are both checked against: ``EnvParams(image_size=0)`` is refused as
 ``env.image_size=0`` is. The recipes build them from their sections
-(``EnvParams.from_section(cfg.env)``, :meth:`Params.from_section`). The history's k and window have one route, the reward's
+(``EnvParams.from_section(cfg.env)``, :meth:`Params.from_section`). The history's k and
+window have one route, the reward's
 (:class:`~temporal_torchrl.rewards.TemporalReward`'s ``k`` and ``window_length``).
 
 Example:

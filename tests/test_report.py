@@ -28,7 +28,7 @@ from temporal_torchrl.reports import (
     reward_curves,
     run_value,
 )
-from temporal_torchrl.reports.aggregate import CENSORED, INCOMPLETE, TimeToEvent
+from temporal_torchrl.reports.aggregate import CENSORED, INCOMPLETE
 from temporal_torchrl.reports.groups import distinguishing_keys
 from temporal_torchrl.reports.logs import csv_scalars
 from temporal_torchrl.reports.reliable import (
@@ -40,6 +40,7 @@ from temporal_torchrl.reports.reliable import (
     run_score,
 )
 from temporal_torchrl.reports.reward_curves import EXPERT, FAILED
+from temporal_torchrl.reports.statistics import TimeToEvent
 from temporal_torchrl.reports.tables import (
     grouping_markdown,
     reliable_markdown,

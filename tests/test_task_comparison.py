@@ -10,11 +10,9 @@ from rliable import metrics
 from scipy import stats
 
 from temporal_torchrl.reports import build_reliable_table, group_runs
+from temporal_torchrl.reports.statistics import ABOVE, BELOW, NOT_RESOLVED
 from temporal_torchrl.reports.tables import task_comparison_markdown, task_comparison_rows
 from temporal_torchrl.reports.task_comparison import (
-    ABOVE,
-    BELOW,
-    NOT_RESOLVED,
     compare_configurations,
     compare_on_task,
     compared_pairs,
@@ -43,34 +41,36 @@ def test_interval_and_p_are_welchs():
     comparison = compare_on_task("FuRL + D3", "SAC", "drawer-open", D3, SAC, comparisons=9)
     difference, low, high, p = welch_by_hand(D3, SAC, 0.95)
     assert comparison.difference == pytest.approx(difference)
-    assert (comparison.low, comparison.high) == pytest.approx((low, high))
-    assert comparison.p_value == pytest.approx(p)
+    welch = comparison.welch
+    assert (welch.low, welch.high) == pytest.approx((low, high))
+    assert welch.p_value == pytest.approx(p)
     _, adjusted_low, adjusted_high, _ = welch_by_hand(D3, SAC, 1 - 0.05 / 9)
-    assert (comparison.adjusted_low, comparison.adjusted_high) == pytest.approx(
+    assert (welch.adjusted_low, welch.adjusted_high) == pytest.approx(
         (adjusted_low, adjusted_high))
-    assert comparison.adjusted_low < comparison.low and comparison.adjusted_high > comparison.high
+    assert welch.adjusted_low < welch.low and welch.adjusted_high > welch.high
     assert comparison.verdict == ABOVE and comparison.pairs_won == 16 == comparison.pairs
     assert comparison.describe() == (
-        "+53.8 [+30.5, +77.0], p = 0.0027: above over 9 [+9.1, +98.4]")
+        "+53.8 [+30.5, +77.0], p = 0.0027: above over 9 comparisons [+9.1, +98.4]")
 
 
 def test_readings_from_not_resolved_to_below():
     # 95% excludes zero, the interval over 9 comparisons does not
     two = compare_on_task("FuRL + D3", "FuRL", "drawer-open", D3, [33.333, 50.667],
                           comparisons=9)
-    assert two.verdict == f"{NOT_RESOLVED} over 9" and two.low > 0 > two.adjusted_low
-    assert two.describe().endswith("above at 95%, not resolved over 9 [-138.7, +243.3]")
+    assert two.verdict == NOT_RESOLVED and two.welch.low > 0 > two.welch.adjusted_low
+    assert two.describe().endswith(
+        "not resolved (above at 95%, not over 9 comparisons [-138.7, +243.3])")
     # the same cell alone: one comparison, nothing to correct for
     assert compare_on_task("a", "b", "t", D3, [33.333, 50.667]).verdict == ABOVE
     level = compare_on_task("FuRL", "SAC", "drawer-open", [33.333, 50.667], SAC)
-    assert level.verdict == NOT_RESOLVED and level.low < 0 < level.high
+    assert level.verdict == NOT_RESOLVED and level.welch.low < 0 < level.welch.high
     assert level.describe().endswith(": not resolved")
     assert compare_on_task("SAC", "FuRL + D3", "drawer-open", SAC, D3).verdict == BELOW
 
 
 def test_no_interval_without_a_seed_error():
     single = compare_on_task("a", "b", "t", [80.0], [10.0, 20.0])
-    assert single.low is None and single.verdict == NOT_RESOLVED
+    assert single.welch is None and single.verdict == NOT_RESOLVED
     assert single.describe() == "+65.0: not resolved (a single run has no seed error)"
     flat = compare_on_task("a", "b", "t", [100.0, 100.0], [0.0, 0.0])
     assert flat.reason == "every run of each scored the same" and flat.pairs_won == 4
@@ -114,7 +114,7 @@ def test_the_reports_pairs_on_their_common_tasks(tmp_path):
     assert first.baseline_values == (0.0, 0.0, 0.0) and first.pairs_won == 9
     markdown = task_comparison_markdown(comparisons)
     assert "| FuRL ρ=0.05 − SAC | drawer-open | 3 · 3 | +73.3 [" in markdown
-    assert "over the 3 comparisons of this table" in markdown
+    assert "the interval over all 3 comparisons of this table (Bonferroni" in markdown
     rows = task_comparison_rows(comparisons)
     assert rows[1]["reading"] == NOT_RESOLVED and rows[0]["pairs"] == "9"
     with pytest.raises(ValueError, match="only RAS is compared"):

@@ -17,15 +17,9 @@ from temporal_torchrl.reports import group_runs
 from temporal_torchrl.reports.aggregate import INCOMPLETE, VALUE, Cell, RunValue
 from temporal_torchrl.reports.published import PublishedCell
 from temporal_torchrl.reports.reliable import build_reliable_table
+from temporal_torchrl.reports.statistics import ABOVE, BELOW, EQUIVALENT, NOT_RESOLVED
 from temporal_torchrl.reports.tables import reliable_markdown
-from temporal_torchrl.reports.thesis_comparison import (
-    ABOVE,
-    BELOW,
-    EQUIVALENT,
-    NOT_RESOLVED,
-    compare_averages,
-    compare_with_thesis,
-)
+from temporal_torchrl.reports.thesis_comparison import compare_averages, compare_with_thesis
 from temporal_torchrl.reports.thesis_table import NOT_RUN, build_thesis_table
 from temporal_torchrl.runs import find_runs
 
@@ -166,7 +160,7 @@ def test_thesis_table_page_lays_out_ours_beside_the_thesis(tmp_path):
     assert average.thesis == pytest.approx((53.5 + 32.8) / 2)
     assert average.comparison is not None and page.averages[best].comparison is None
     # three cells compared (SAC twice, FuRL + D3 once): each interval is table-wide over 3
-    assert {comparison.cells for comparison in page.comparisons.values()} == {3}
+    assert {comparison.comparisons for comparison in page.comparisons.values()} == {3}
     sac = page.comparisons["drawer-open", "SAC"]
     scipy_low, _ = stats.ttest_ind([40.0, 50.0, 60.0], stand_in(53.5, 10.0),
                                    equal_var=False).confidence_interval(1 - 0.05 / 3)

@@ -9,6 +9,9 @@
   and performance profiles, with stratified-bootstrap CIs.
 - :mod:`~temporal_torchrl.reports.published`: the thesis's Tables 5.2-5.12 as data, matched
   to run configurations.
+- :mod:`~temporal_torchrl.reports.statistics`: every interval, test and reading the reports
+  print, in one place: Welch's differences and the plan's readings, Kaplan-Meier times, the
+  primary claim's stratified permutation test, bootstrap and Holm.
 - :mod:`~temporal_torchrl.reports.thesis_comparison`: a cell or an average against the thesis's,
   its seed error counted: the difference's interval and what it lets us say.
 - :mod:`~temporal_torchrl.reports.task_comparison`: two configurations on one task: the

@@ -19,7 +19,8 @@ Runs without a value (RAS incomplete or undefined) are listed with the cell, nev
 Average row is the mean of the task means, as in the thesis, given only when a configuration has
 complete cells on every task of the table. Interval estimates are
 :mod:`~temporal_torchrl.reports.reliable`'s (rliable), over tasks and seeds, and
-:mod:`~temporal_torchrl.reports.thesis_comparison`'s against the thesis.
+:mod:`~temporal_torchrl.reports.thesis_comparison`'s against the thesis, both built on
+:mod:`~temporal_torchrl.reports.statistics`, which also holds the Kaplan-Meier estimate.
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.protocol_metrics import (
@@ -44,11 +44,8 @@ from temporal_torchrl.reports.published import (
     PublishedResult,
     find_published,
 )
-from temporal_torchrl.reports.thesis_comparison import (
-    EQUIVALENCE_MARGIN,
-    ThesisComparison,
-    compare_with_thesis,
-)
+from temporal_torchrl.reports.statistics import EQUIVALENCE_MARGIN, TimeToEvent
+from temporal_torchrl.reports.thesis_comparison import ThesisComparison, compare_with_thesis
 from temporal_torchrl.runs.readers import Run
 
 #: A run has the metric.
@@ -127,40 +124,6 @@ def run_value(run: Run, metric: str, *, window: int = DEFAULT_WINDOW,
     if not _reached(run, count, horizon) and run.episodes < horizon:
         return RunValue(run, None, CENSORED)
     return RunValue(run, float(time_to_successes(run.successes, count, horizon)), VALUE)
-
-
-@dataclass(frozen=True)
-class TimeToEvent:
-    """A cell's TTFS or TT50S by Kaplan-Meier (``scipy.stats.ecdf`` on ``CensoredData``): a run
-    that stopped without the event is censored at its episodes, one at the horizon at the
-    horizon.
-
-    Attributes:
-        median: the first time at which the estimated share of runs still waiting is at most
-            one half; None when it never falls that far (*not reached*).
-        reached: the runs that had the event.
-        runs: the runs estimated over.
-    """
-
-    median: float | None
-    reached: int
-    runs: int
-
-    @classmethod
-    def estimate(cls, observed: Sequence[float], censored: Sequence[float]) -> TimeToEvent:
-        if not observed:
-            return cls(None, 0, len(censored))
-        data = stats.CensoredData(uncensored=np.asarray(observed, dtype=float),
-                                  right=np.asarray(censored, dtype=float))
-        survival = stats.ecdf(data).sf
-        below_half = survival.quantiles[survival.probabilities <= 0.5]
-        median = float(below_half[0]) if below_half.size else None
-        return cls(median, len(observed), len(observed) + len(censored))
-
-    def describe(self, decimals: int = 0) -> str:
-        """``median 145 (3 of 4 reached)`` or ``median not reached (1 of 4 reached)``."""
-        median = "not reached" if self.median is None else f"{self.median:.{decimals}f}"
-        return f"median {median} ({self.reached} of {self.runs} reached)"
 
 
 @dataclass(frozen=True)

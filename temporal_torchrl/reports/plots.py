@@ -32,7 +32,6 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from rliable import plot_utils
-from scipy import stats
 
 from temporal_torchrl.envs import get_task
 from temporal_torchrl.protocol_metrics import DEFAULT_WINDOW
@@ -40,6 +39,7 @@ from temporal_torchrl.reports.groups import RunGroup, order_tasks
 from temporal_torchrl.reports.logs import Series
 from temporal_torchrl.reports.reliable import ReliableTable
 from temporal_torchrl.reports.reward_curves import EpisodeRewards
+from temporal_torchrl.reports.statistics import mean_half_width
 from temporal_torchrl.runs.readers import Run
 
 #: The thesis's colours in Figure 5.12: positive blue, negative orange.
@@ -70,9 +70,7 @@ def t_interval_band(level: float = 0.95, bounds: tuple[float, float] | None = No
     """The ``level`` t-interval of the mean over seeds, mean ± t_(n-1) s / sqrt(n), clipped to
     ``bounds`` when given (a rate's range)."""
     def band(values: np.ndarray, mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        seeds = values.shape[0]
-        half = (stats.t.ppf(0.5 + level / 2, seeds - 1) * values.std(axis=0, ddof=1)
-                / np.sqrt(seeds))
+        half = mean_half_width(values, level)
         low, high = mean - half, mean + half
         return (low, high) if bounds is None else (np.clip(low, *bounds), np.clip(high, *bounds))
     return band

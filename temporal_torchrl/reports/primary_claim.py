@@ -3,7 +3,7 @@
 The Table 5.12 analysis plan (``docs/results/table_5_12/analysis_plan.md``) fixes the test
 before the runs: over every task on which each configuration of the claim has every planned
 seed finished, the difference of mean RAS over tasks Δ(X, Y), a stratified permutation test
-(:mod:`~temporal_torchrl.reports.aggregate_tests`), Holm's correction over the primary pairs, a
+(:mod:`~temporal_torchrl.reports.statistics`), Holm's correction over the primary pairs, a
 95% stratified-bootstrap interval for the size and, as a sensitivity analysis only, the paired
 sign-flip test (runs paired by seed, which shares the layout). Secondary pairs get the same
 numbers outside Holm's family. Runs of seeds outside the plan (added after looking) enter
@@ -19,14 +19,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from temporal_torchrl.reports.aggregate import VALUE, run_value
-from temporal_torchrl.reports.aggregate_tests import (
+from temporal_torchrl.reports.groups import RunGroup, planned_runs
+from temporal_torchrl.reports.statistics import (
     SEED,
     holm,
     paired_sign_flip_test,
     stratified_bootstrap_interval,
     stratified_permutation_test,
 )
-from temporal_torchrl.reports.groups import RunGroup, planned_runs
 from temporal_torchrl.reports.tables import markdown_table
 
 #: The seeds the Table 5.12 plan fixed, when a report names none.

@@ -42,8 +42,9 @@ from temporal_torchrl.reports.reliable import (
     Scores,
     score_rule,
 )
+from temporal_torchrl.reports.statistics import reading_legend
 from temporal_torchrl.reports.task_comparison import TaskComparison
-from temporal_torchrl.reports.thesis_comparison import ThesisComparison, reading_legend
+from temporal_torchrl.reports.thesis_comparison import ThesisComparison
 from temporal_torchrl.rewards.config import has_vlm_reward
 
 CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "median", "reached", "censored",
@@ -489,12 +490,11 @@ def task_comparison_markdown(comparisons: Sequence[TaskComparison]) -> str:
         markdown_table(["Comparison (X − Y)", "Task", "Runs (X · Y)",
                         "Δ [95% CI], p: reading", "Run pairs X won"], rows), "",
         "Δ: X's mean RAS minus Y's, from unrounded means, with Welch's 95% interval and "
-        f"two-sided p (no equal-spread assumption). *above* / *below*: the interval at the "
-        f"Bonferroni level over the {m} comparisons of this table (shown after it) excludes 0; "
-        f"*not resolved over {m}*: only the 95% interval does; *not resolved*: the 95% "
-        "interval includes 0. Run pairs X won: of the pairs of a run of X and a run of Y on the "
-        "task, those where X's RAS is higher (ties count half), rliable's P(X > Y) on this task "
-        "times the number of pairs; all of them won is what these runs show, not certainty.",
+        "two-sided p (no equal-spread assumption). "
+        f"{reading_legend(m, None, 'comparisons of this table')} Run pairs X won: of the "
+        "pairs of a run of X and a run of Y on the task, those where X's RAS is higher (ties "
+        "count half), rliable's P(X > Y) on this task times the number of pairs; all of them "
+        "won is what these runs show, not certainty.",
         ""])
 
 
@@ -503,11 +503,12 @@ def task_comparison_rows(comparisons: Sequence[TaskComparison]) -> list[dict[str
     return [{"configuration": each.label, "baseline": each.baseline, "task": each.task,
              "n": str(len(each.values)), "baseline_n": str(len(each.baseline_values)),
              "difference": _optional(each.difference),
-             "difference_ci95_low": _optional(each.low),
-             "difference_ci95_high": _optional(each.high),
-             "p_value": _optional(each.p_value), "comparisons": str(each.comparisons),
-             "difference_adjusted_low": _optional(each.adjusted_low),
-             "difference_adjusted_high": _optional(each.adjusted_high),
+             "difference_ci95_low": _optional(each.welch and each.welch.low),
+             "difference_ci95_high": _optional(each.welch and each.welch.high),
+             "p_value": _optional(each.welch and each.welch.p_value),
+             "comparisons": str(each.comparisons),
+             "difference_adjusted_low": _optional(each.welch and each.welch.adjusted_low),
+             "difference_adjusted_high": _optional(each.welch and each.welch.adjusted_high),
              "pairs_won": f"{each.pairs_won:g}", "pairs": str(each.pairs),
              "reading": each.verdict if each.reason is None
              else f"{each.verdict} ({each.reason})"} for each in comparisons]

@@ -33,6 +33,7 @@ from temporal_torchrl.reports.published import (
     PublishedTable,
     published_tables,
 )
+from temporal_torchrl.reports.statistics import reading_legend
 from temporal_torchrl.reports.tables import (
     NOT_RECORDED,
     cell_text,
@@ -43,7 +44,6 @@ from temporal_torchrl.reports.thesis_comparison import (
     ThesisComparison,
     compare_averages,
     compare_with_thesis,
-    reading_legend,
 )
 from temporal_torchrl.rewards.config import has_vlm_reward
 
@@ -281,7 +281,7 @@ def thesis_table_rows(page: ThesisTablePage) -> list[dict[str, str]]:
         return {"difference": optional(comparison.difference),
                 "difference_ci95_low": optional(comparison.low),
                 "difference_ci95_high": optional(comparison.high),
-                "cells_compared": str(comparison.cells),
+                "cells_compared": str(comparison.comparisons),
                 "adjusted_ci_low": optional(comparison.adjusted_low),
                 "adjusted_ci_high": optional(comparison.adjusted_high),
                 "reading": comparison.verdict}

@@ -1,5 +1,5 @@
-"""The primary claim's statistics (temporal_torchrl.reports.aggregate_tests) against
-computations written out here, by enumeration or by hand, never against the module itself."""
+"""The report's statistics (temporal_torchrl.reports.statistics) against computations written
+out here, by enumeration or by hand, or scipy's, never against the module itself."""
 
 import doctest
 import itertools
@@ -8,15 +8,24 @@ import statistics
 
 import numpy as np
 import pytest
+from scipy import stats
 
-from temporal_torchrl.reports import aggregate_tests
-from temporal_torchrl.reports.aggregate_tests import (
+from temporal_torchrl.reports import statistics as report_statistics
+from temporal_torchrl.reports.statistics import (
+    ABOVE,
+    BELOW,
+    EQUIVALENT,
+    NOT_RESOLVED,
+    TimeToEvent,
     exact_stratified_permutation_test,
     holm,
     mean_difference_over_tasks,
+    mean_half_width,
     paired_sign_flip_test,
+    reading_legend,
     stratified_bootstrap_interval,
     stratified_permutation_test,
+    welch_two_samples,
 )
 
 # Two tasks, 3 + 2 and 2 + 2 runs: C(5, 3) * C(4, 2) = 60 relabellings; "reach" is X's only.
@@ -69,7 +78,7 @@ def enumerated_sign_flip_p(x, y):
 
 
 def test_docstring_example_runs():
-    assert doctest.testmod(aggregate_tests).failed == 0
+    assert doctest.testmod(report_statistics).failed == 0
 
 
 def test_mean_difference_by_hand():
@@ -223,3 +232,54 @@ def test_errors_name_the_problem():
         stratified_bootstrap_interval(X, Y, level=1.0)
     with pytest.raises(ValueError, match="non-finite"):
         mean_difference_over_tasks({"a": [float("nan")]}, {"a": [1.0]})
+
+
+# --------------------------------------------------------------------- Welch, against scipy's
+def test_welch_two_samples_is_scipys_interval_and_p():
+    x, y = [74.0, 73.3, 82.0, 74.7], [30.7, 48.0, 42.7, 45.3, 39.0]
+    result = stats.ttest_ind(x, y, equal_var=False)
+    welch = welch_two_samples(x, y, comparisons=9, margin=10.0)
+    assert welch.difference == pytest.approx(np.mean(x) - np.mean(y))
+    assert (welch.low, welch.high) == pytest.approx(tuple(result.confidence_interval(0.95)))
+    assert (welch.adjusted_low, welch.adjusted_high) == pytest.approx(
+        tuple(result.confidence_interval(1 - 0.05 / 9)))
+    assert (welch.equivalence_low, welch.equivalence_high) == pytest.approx(
+        tuple(result.confidence_interval(0.90)))
+    assert welch.p_value == pytest.approx(result.pvalue)
+    assert welch.degrees_of_freedom == pytest.approx(result.df)
+
+
+def test_one_vocabulary_of_readings():
+    above = welch_two_samples([90.0, 92.0, 95.0, 93.0], [30.0, 35.0, 33.0, 31.0], comparisons=9)
+    assert above.verdict == ABOVE and above.p_value < 0.00005
+    assert ", p < 0.0001: above over 9 comparisons [" in above.describe(
+        p=True, family="comparisons")
+    below = welch_two_samples([30.0, 35.0, 33.0, 31.0], [90.0, 92.0, 95.0, 93.0])
+    assert below.verdict == BELOW
+    level = welch_two_samples([50.0, 52.0, 51.0, 49.0], [50.5, 51.5, 50.0, 49.5], margin=10.0)
+    assert level.verdict == EQUIVALENT and "equivalent within ±10 (90% [" in level.describe()
+    assert welch_two_samples([50.0, 52.0, 51.0, 49.0], [50.5, 51.5, 50.0, 49.5]).verdict == (
+        NOT_RESOLVED)  # no margin: never equivalent
+    legend = reading_legend(9, None, "comparisons of this table")
+    assert "over all 9 comparisons of this table" in legend and "equivalent" not in legend
+    with pytest.raises(ValueError, match="no seed error"):
+        welch_two_samples([1.0, 1.0], [2.0, 2.0])
+    with pytest.raises(ValueError, match="at least 2 seeds"):
+        welch_two_samples([1.0], [2.0, 3.0])
+
+
+def test_mean_half_width_is_scipys_t_interval():
+    values = np.array([[1.0, 10.0], [3.0, 14.0], [2.0, 11.0]])
+    for step in range(2):
+        low, high = stats.t.interval(0.95, 2, loc=values[:, step].mean(),
+                                     scale=stats.sem(values[:, step]))
+        assert mean_half_width(values)[step] == pytest.approx((high - low) / 2)
+
+
+def test_kaplan_meier_median_by_hand():
+    # 4 runs: events at 100 and 150, censored at 120 and 200. Survival: 3/4 after 100; the run
+    # censored at 120 leaves 2 at risk, so 3/4 * 1/2 = 3/8 <= 1/2 after 150: the median is 150.
+    estimate = TimeToEvent.estimate([100.0, 150.0], [120.0, 200.0])
+    assert estimate == TimeToEvent(150.0, 2, 4)
+    assert TimeToEvent.estimate([100.0], [120.0, 200.0, 300.0]).median is None
+    assert TimeToEvent.estimate([], [200.0]).describe() == "median not reached (0 of 1 reached)"
