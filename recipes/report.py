@@ -55,7 +55,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-from collections.abc import Sequence
 from pathlib import Path
 
 from temporal_torchrl.reports import (
@@ -68,7 +67,6 @@ from temporal_torchrl.reports import (
     reward_curves,
 )
 from temporal_torchrl.reports.evaluation import (
-    EVALUATION_TABLE_COLUMNS,
     build_evaluation_table,
     evaluation_markdown,
     evaluation_rows,
@@ -90,28 +88,24 @@ from temporal_torchrl.reports.plots import (
 )
 from temporal_torchrl.reports.primary_claim import (
     PLANNED_SEEDS,
-    PRIMARY_CLAIM_COLUMNS,
     build_primary_claim,
     primary_claim_markdown,
     primary_claim_rows,
 )
+from temporal_torchrl.reports.rows import Table
 from temporal_torchrl.reports.tables import (
-    CSV_COLUMNS,
     RELIABLE_COLUMNS,
-    RUN_COLUMNS,
-    TASK_COMPARISON_COLUMNS,
     grouping_markdown,
+    metric_rows,
     reliable_markdown,
     reliable_rows,
     run_rows,
     table_markdown,
-    table_rows,
     task_comparison_markdown,
     task_comparison_rows,
 )
 from temporal_torchrl.reports.task_comparison import compare_configurations
 from temporal_torchrl.reports.thesis_table import (
-    THESIS_TABLE_COLUMNS,
     build_thesis_table,
     thesis_table_markdown,
     thesis_table_rows,
@@ -126,9 +120,9 @@ HOW_TO_READ = """\
   is *incomplete*: shown with its episode count, never scored.
 - TTFS / TT50S are the episode of the first / 50th success. A run that reached 1,000 episodes
   without it counts 1,000 (the thesis's convention). A shorter run without it is *censored*
-  (`> N ep`: not reached in its N episodes) and counts 1,000 too, so that a mean is not made
-  of the fast runs alone; such a mean is an upper bound, and its cell gives the median beside
-  it (undetermined where it depends on the censored runs).
+  (`> N ep`: not reached in its N episodes): its cell gives the Kaplan-Meier median and how
+  many runs reached the event, and no mean, since any stand-in for the unknown time would
+  decide the mean.
 - A cell's mean ± sample std and its n are over its runs, as the thesis prints them. With a
   few seeds a mean says little: the comparisons with the thesis and the rliable section give
   intervals.
@@ -221,11 +215,11 @@ def metric_file(key: str) -> str:
     return "metric_" + re.sub(r"[^A-Za-z0-9_.]+", "-", key).strip("-") + ".png"
 
 
-def write_table(out: Path, name: str, markdown: str, rows: list[dict[str, str]],
-                columns: Sequence[str]) -> str:
-    """``name``.md and ``name``.csv in ``out``; the Markdown printed and returned."""
+def write_table(out: Path, name: str, markdown: str, rows: Table) -> str:
+    """``name``.md and ``name``.csv in ``out``, the Markdown written from ``rows`` (the
+    table's one row model); the Markdown printed and returned."""
     (out / f"{name}.md").write_text(markdown)
-    write_csv(out / f"{name}.csv", rows, columns)
+    write_csv(out / f"{name}.csv", rows.csv_rows(), rows.fields)
     print(markdown)
     return markdown
 
@@ -274,19 +268,20 @@ def main(argv: list[str] | None = None) -> None:
     if page is not None:
         name = "table_" + page.table.number.replace(".", "_")
         markdown = write_table(args.out, name, thesis_table_markdown(page),
-                               thesis_table_rows(page), THESIS_TABLE_COLUMNS)
+                               thesis_table_rows(page))
         sections.insert(4, markdown)  # the report leads with it, before how to read it
     if claim is not None:
         sections.insert(5 if page is not None else 4, write_table(
-            args.out, "primary_claim", primary_claim_markdown(claim), primary_claim_rows(claim),
-            PRIMARY_CLAIM_COLUMNS))
+            args.out, "primary_claim", primary_claim_markdown(claim),
+            primary_claim_rows(claim)))
 
     tables = {}
     for metric in METRICS:
         table = tables[metric] = build_table(groups, metric)
-        sections.append(write_table(args.out, metric, table_markdown(table), table_rows(table),
-                                    CSV_COLUMNS))
-    write_csv(args.out / "runs.csv", run_rows(groups, args.dirs), RUN_COLUMNS)
+        sections.append(write_table(args.out, metric, table_markdown(table),
+                                    metric_rows(table)))
+    runs = run_rows(groups, args.dirs)
+    write_csv(args.out / "runs.csv", runs.csv_rows(), runs.fields)
 
     # The intervals and the comparisons are statistics a plan fixes: on its seeds only.
     planned = groups if args.planned_seeds is None else planned_runs(groups,
@@ -298,20 +293,20 @@ def main(argv: list[str] | None = None) -> None:
     sections.append(write_table(
         args.out, "aggregates",
         "\n".join(["## Over tasks and seeds (rliable)", "", *map(reliable_markdown, reliable)]),
-        [row for table in reliable for row in reliable_rows(table)], RELIABLE_COLUMNS))
+        Table(RELIABLE_COLUMNS, [row for table in reliable for row in reliable_rows(table).rows])))
 
     comparisons = compare_configurations(ras_reliable)
     if comparisons:
         sections.append(write_table(args.out, "comparisons",
                                     task_comparison_markdown(comparisons),
-                                    task_comparison_rows(comparisons), TASK_COMPARISON_COLUMNS))
+                                    task_comparison_rows(comparisons)))
 
     # Only runs that evaluated (eval.csv) make this section: without any, nothing is said.
     evaluation = build_evaluation_table(groups, ras=tables["ras"], ras_reliable=ras_reliable,
                                         reps=args.bootstrap, seed=args.seed)
     if evaluation is not None:
         sections.append(write_table(args.out, "evaluation", evaluation_markdown(evaluation),
-                                    evaluation_rows(evaluation), EVALUATION_TABLE_COLUMNS))
+                                    evaluation_rows(evaluation)))
 
     figures = ["## Figures"]
     colours = configuration_colours(labels)

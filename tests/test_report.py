@@ -43,10 +43,10 @@ from temporal_torchrl.reports.reward_curves import EXPERT, FAILED
 from temporal_torchrl.reports.statistics import TimeToEvent
 from temporal_torchrl.reports.tables import (
     grouping_markdown,
+    metric_rows,
     reliable_markdown,
     reliable_rows,
     table_markdown,
-    table_rows,
 )
 from temporal_torchrl.rewards import TemporalReward
 from temporal_torchrl.runs import find_runs
@@ -55,7 +55,8 @@ FURL = ("preset=furl", "protocol=stage2")
 
 
 def rows_by(table, task):
-    return {row["configuration"]: row for row in table_rows(table) if row["task"] == task}
+    return {row["configuration"]: row for row in metric_rows(table).csv_rows()
+            if row["task"] == task}
 
 
 def markdown_row(markdown: str, task: str) -> list[str]:
@@ -410,7 +411,7 @@ def test_reliable_table_over_a_baseline_one_task_and_missing_ones(tmp_path):
     assert "| SAC | 1 | 3 | " in markdown and "| baseline |" in markdown
     assert "| 1.00 [1.00, 1.00] |" in markdown
     assert "- P2 ρ=0.05 (b_g): no scored run on SAC's tasks (drawer-open)" in markdown
-    rows = {row["configuration"]: row for row in reliable_rows(table)}
+    rows = {row["configuration"]: row for row in reliable_rows(table).csv_rows()}
     assert rows["FuRL ρ=0.05"]["p_improvement"] == "1"
     assert float(rows["SAC"]["iqm"]) == pytest.approx(1 - 202 / 1000)  # 3 runs: their mean
     # another baseline; and one no configuration has

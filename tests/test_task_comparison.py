@@ -115,7 +115,7 @@ def test_the_reports_pairs_on_their_common_tasks(tmp_path):
     markdown = task_comparison_markdown(comparisons)
     assert "| FuRL ρ=0.05 − SAC | drawer-open | 3 · 3 | +73.3 [" in markdown
     assert "the interval over all 3 comparisons of this table (Bonferroni" in markdown
-    rows = task_comparison_rows(comparisons)
+    rows = task_comparison_rows(comparisons).csv_rows()
     assert rows[1]["reading"] == NOT_RESOLVED and rows[0]["pairs"] == "9"
     with pytest.raises(ValueError, match="only RAS is compared"):
         compare_configurations(build_reliable_table(groups, "ttfs", reps=10))

@@ -21,7 +21,9 @@
 - :mod:`~temporal_torchrl.reports.evaluation`: the runs' periodic evaluations of the
   deterministic policy (``eval.csv``): final evaluation success per task and, with rliable, over
   tasks and seeds, beside RAS.
-- :mod:`~temporal_torchrl.reports.tables`: Markdown and CSV output.
+- :mod:`~temporal_torchrl.reports.rows`: the row model every table is, written to CSV and to
+  Markdown by one renderer.
+- :mod:`~temporal_torchrl.reports.tables`: the per-metric, rliable and per-task tables as rows.
 - :mod:`~temporal_torchrl.reports.logs`: logged training metrics (the run's metrics.jsonl).
 - :mod:`~temporal_torchrl.reports.reward_curves`: r_P and r_D along stored episodes with a
   run's saved heads (Figure 5.12).

@@ -37,7 +37,13 @@ from temporal_torchrl.reports.reliable import (
     Scores,
     aggregate_intervals,
 )
-from temporal_torchrl.reports.tables import EMPTY_CELL, cell_text, markdown_table
+from temporal_torchrl.reports.rows import EMPTY_CELL, Column, Row, Table, field_column
+from temporal_torchrl.reports.tables import (
+    cell_fields,
+    cell_text,
+    interval_fields,
+    interval_text,
+)
 from temporal_torchrl.runs.readers import Run
 
 #: The columns of ``evaluation.csv``: one row per task and configuration (the mean and std of
@@ -45,10 +51,11 @@ from temporal_torchrl.runs.readers import Run
 #: (``task`` ``all``) with the rliable aggregates. Success rates and their aggregates are
 #: fractions in [0, 1]; RAS is in %, as in ``ras.csv``.
 EVALUATION_TABLE_COLUMNS = (
-    "task", "configuration", "runs", "evaluated", "last_success_rate_mean",
+    "task", "configuration", "tasks", "runs", "evaluated", "last_success_rate_mean",
     "last_success_rate_std", "last_evaluation_episodes", "iqm", "iqm_ci95_low", "iqm_ci95_high",
-    "mean", "mean_ci95_low", "mean_ci95_high", "ras_mean", "ras_std", "ras_n", "ras_iqm",
-    "ras_iqm_ci95_low", "ras_iqm_ci95_high")
+    "mean", "mean_ci95_low", "mean_ci95_high", "ras_mean", "ras_std", "ras_n", "ras_pending",
+    "ras_iqm", "ras_iqm_ci95_low", "ras_iqm_ci95_high", "ras_mean_over_tasks",
+    "ras_mean_over_tasks_ci95_low", "ras_mean_over_tasks_ci95_high")
 #: The task of the CSV rows over all of a configuration's tasks.
 ALL_TASKS = "all"
 
@@ -166,49 +173,78 @@ def build_evaluation_table(groups: Sequence[RunGroup], *, ras: MetricTable | Non
 
 
 # --------------------------------------------------------------------------- Markdown and CSV
-def _percent(rate: float) -> str:
-    return f"{100 * rate:.{METRICS['ras'].decimals}f}"
-
-
-def _cell_text(cell: EvaluationCell) -> str:
-    """``62.5 ± 17.7 (n=2)``, and the runs without evaluation."""
-    text = _percent(cell.mean)
-    if cell.std is not None:
-        text += f" ± {_percent(cell.std)}"
-    text += f" (n={len(cell.runs)})"
-    if cell.unevaluated:
-        text += f"; {cell.unevaluated} not evaluated"
-    return text
-
-
-def _episodes_text(episodes: Sequence[int]) -> str:
-    return (str(episodes[0]) if len(episodes) == 1
-            else f"{episodes[0]}–{episodes[-1]}")
-
-
-def _interval_text(interval: Interval | None) -> str:
-    if interval is None:
-        return EMPTY_CELL
-    return f"{interval.estimate:.2f} [{interval.low:.2f}, {interval.high:.2f}]"
-
-
-def evaluation_markdown(table: EvaluationTable) -> str:
-    """The report's evaluation section: per task, then over tasks and seeds (rliable)."""
-    decimals = METRICS["ras"].decimals
-    with_ras = any(table.ras_cell(task, label) is not None for task, label in table.cells)
-    header = ["Task", "Configuration", "Final evaluation success (%)",
-              "Last evaluation after (episodes)"] + (["RAS (%)"] if with_ras else [])
+def evaluation_rows(table: EvaluationTable) -> Table:
+    """The rows of ``table`` (:data:`EVALUATION_TABLE_COLUMNS`): the cells, then one row per
+    configuration over its tasks."""
     rows = []
     for task in table.tasks:
         for label in table.labels:
             cell = table.cells.get((task, label))
             if cell is None:
                 continue
-            row = [task, label, _cell_text(cell), _episodes_text(cell.last_episodes)]
-            if with_ras:
-                ras = table.ras_cell(task, label)
-                row.append(EMPTY_CELL if ras is None else cell_text(ras, decimals))
-            rows.append(row)
+            ras = table.ras_cell(task, label)
+            rows.append({
+                "task": task, "configuration": label,
+                "runs": len(cell.runs) + cell.unevaluated, "evaluated": len(cell.runs),
+                "last_success_rate_mean": cell.mean, "last_success_rate_std": cell.std,
+                "last_evaluation_episodes": " ".join(map(str, cell.last_episodes)),
+                **({} if ras is None else {
+                    "ras_mean": ras.mean, "ras_std": ras.std, "ras_n": len(ras.values),
+                    "ras_pending": cell_fields(ras)["pending"]})})
+    for label in table.labels:
+        cells = [cell for (_, each), cell in table.cells.items() if each == label]
+        rows.append({
+            "task": ALL_TASKS, "configuration": label,
+            "tasks": " ".join(table.scores[label].tasks),
+            "runs": sum(len(cell.runs) + cell.unevaluated for cell in cells),
+            "evaluated": table.scores[label].scored,
+            **interval_fields("iqm", table.iqm[label]),
+            **interval_fields("mean", table.mean[label]),
+            **interval_fields("ras_iqm", table.ras_iqm(label)),
+            **interval_fields("ras_mean_over_tasks", table.ras_mean(label))})
+    return Table(EVALUATION_TABLE_COLUMNS, rows)
+
+
+def _percent(rate: float) -> str:
+    return f"{100 * rate:.{METRICS['ras'].decimals}f}"
+
+
+def _success_text(row: Row) -> str:
+    """``62.5 ± 17.7 (n=2)``, and the runs without evaluation."""
+    text = _percent(row["last_success_rate_mean"])
+    if row["last_success_rate_std"] is not None:
+        text += f" ± {_percent(row['last_success_rate_std'])}"
+    text += f" (n={row['evaluated']})"
+    unevaluated = row["runs"] - row["evaluated"]
+    if unevaluated:
+        text += f"; {unevaluated} not evaluated"
+    return text
+
+
+def _episodes_text(row: Row) -> str:
+    episodes = row["last_evaluation_episodes"].split()
+    return episodes[0] if len(episodes) == 1 else f"{episodes[0]}–{episodes[-1]}"
+
+
+def _ras_text(row: Row) -> str:
+    """The RAS cell's text (:func:`~temporal_torchrl.reports.tables.cell_text`) from the row's
+    ``ras_*`` fields."""
+    if row.get("ras_n") is None:
+        return EMPTY_CELL
+    return cell_text({"mean": row["ras_mean"], "std": row["ras_std"], "n": row["ras_n"],
+                      "reached": None, "censored": 0, "censored_episodes": "",
+                      "pending": row["ras_pending"]}, METRICS["ras"].decimals)
+
+
+def evaluation_markdown(table: EvaluationTable) -> str:
+    """The report's evaluation section: per task, then over tasks and seeds (rliable)."""
+    rows = evaluation_rows(table)
+    with_ras = any(row.get("ras_n") is not None for row in rows.rows)
+    columns = [field_column("Task", "task"), field_column("Configuration", "configuration"),
+               Column("Final evaluation success (%)", _success_text),
+               Column("Last evaluation after (episodes)", _episodes_text)]
+    if with_ras:
+        columns.append(Column("RAS (%)", _ras_text))
     per_task = ("Final evaluation success: the success rate of a run's last evaluation of its "
                 "deterministic policy (the fraction of its evaluation episodes with success at "
                 "any step: eval.csv's success_rate), mean ± sample std over the seeds evaluated "
@@ -217,18 +253,17 @@ def evaluation_markdown(table: EvaluationTable) -> str:
         per_task += (" RAS: the RAS table's cell, over all the configuration's runs on the task "
                      "(evaluated or not).")
 
-    ras_aggregates = any(table.ras_iqm(label) is not None for label in table.labels)
-    header_all = ["Configuration", "Tasks", "Runs evaluated", "IQM [95% CI]", "Mean [95% CI]"]
+    over_tasks = [row for row in rows.rows if row["task"] == ALL_TASKS]
+    ras_aggregates = any(row.get("ras_iqm") is not None for row in over_tasks)
+    columns_all = [field_column("Configuration", "configuration"),
+                   Column("Tasks", lambda row: str(len(row["tasks"].split()))),
+                   field_column("Runs evaluated", "evaluated"),
+                   Column("IQM [95% CI]", lambda row: interval_text(row, "iqm")),
+                   Column("Mean [95% CI]", lambda row: interval_text(row, "mean"))]
     if ras_aggregates:
-        header_all += ["RAS IQM [95% CI]", "RAS Mean [95% CI]"]
-    rows_all = []
-    for label in table.labels:
-        scores = table.scores[label]
-        row = [label, str(len(scores.tasks)), str(scores.scored),
-               _interval_text(table.iqm[label]), _interval_text(table.mean[label])]
-        if ras_aggregates:
-            row += [_interval_text(table.ras_iqm(label)), _interval_text(table.ras_mean(label))]
-        rows_all.append(row)
+        columns_all += [Column("RAS IQM [95% CI]", lambda row: interval_text(row, "ras_iqm")),
+                        Column("RAS Mean [95% CI]",
+                               lambda row: interval_text(row, "ras_mean_over_tasks"))]
     over = ("Scores: each evaluated run's final evaluation success rate, in [0, 1]. IQM: the "
             "mean of the middle 50% of the configuration's run scores, tasks pooled; Mean: the "
             f"mean of its task means; 95% stratified-bootstrap CIs (runs resampled within each "
@@ -243,48 +278,6 @@ def evaluation_markdown(table: EvaluationTable) -> str:
         "periodically (eval.every); the runs without evaluations are left out of this section. "
         "Figure: [evaluation_curves.png](evaluation_curves.png).", "",
         "### Final evaluation success per task", "",
-        markdown_table(header, rows), "", per_task, "",
+        rows.markdown(lambda row: row["task"] != ALL_TASKS, columns), "", per_task, "",
         "### Final evaluation success over tasks and seeds (rliable)", "",
-        markdown_table(header_all, rows_all), "", over]) + "\n"
-
-
-def _optional(value: float | None) -> str:
-    return "" if value is None else f"{value:.10g}"
-
-
-def _interval_fields(prefix: str, interval: Interval | None) -> dict[str, str]:
-    return {prefix: _optional(interval.estimate if interval else None),
-            f"{prefix}_ci95_low": _optional(interval.low if interval else None),
-            f"{prefix}_ci95_high": _optional(interval.high if interval else None)}
-
-
-def evaluation_rows(table: EvaluationTable) -> list[dict[str, str]]:
-    """The CSV rows of ``table`` (:data:`EVALUATION_TABLE_COLUMNS`): the cells, then one row per
-    configuration over its tasks."""
-    empty = dict.fromkeys(EVALUATION_TABLE_COLUMNS, "")
-    rows = []
-    for task in table.tasks:
-        for label in table.labels:
-            cell = table.cells.get((task, label))
-            if cell is None:
-                continue
-            ras = table.ras_cell(task, label)
-            rows.append({
-                **empty, "task": task, "configuration": label,
-                "runs": str(len(cell.runs) + cell.unevaluated), "evaluated": str(len(cell.runs)),
-                "last_success_rate_mean": _optional(cell.mean),
-                "last_success_rate_std": _optional(cell.std),
-                "last_evaluation_episodes": " ".join(map(str, cell.last_episodes)),
-                "ras_mean": _optional(ras.mean if ras else None),
-                "ras_std": _optional(ras.std if ras else None),
-                "ras_n": str(len(ras.values)) if ras else ""})
-    for label in table.labels:
-        cells = [cell for (_, each), cell in table.cells.items() if each == label]
-        rows.append({
-            **empty, "task": ALL_TASKS, "configuration": label,
-            "runs": str(sum(len(cell.runs) + cell.unevaluated for cell in cells)),
-            "evaluated": str(table.scores[label].scored),
-            **_interval_fields("iqm", table.iqm[label]),
-            **_interval_fields("mean", table.mean[label]),
-            **_interval_fields("ras_iqm", table.ras_iqm(label))})
-    return rows
+        rows.markdown(lambda row: row["task"] == ALL_TASKS, columns_all), "", over]) + "\n"

@@ -20,22 +20,22 @@ from dataclasses import dataclass, replace
 
 from temporal_torchrl.reports.aggregate import VALUE, run_value
 from temporal_torchrl.reports.groups import RunGroup, planned_runs
+from temporal_torchrl.reports.rows import EMPTY_CELL, Column, Table, field_column
 from temporal_torchrl.reports.statistics import (
+    ABOVE,
+    BELOW,
+    NOT_RESOLVED,
     SEED,
     holm,
     paired_sign_flip_test,
     stratified_bootstrap_interval,
     stratified_permutation_test,
 )
-from temporal_torchrl.reports.tables import markdown_table
 
 #: The seeds the Table 5.12 plan fixed, when a report names none.
 PLANNED_SEEDS = (0, 1, 2, 3)
 #: The family-wise level of the primary claim.
 ALPHA = 0.05
-ABOVE = "above"
-BELOW = "below"
-NOT_RESOLVED = "not resolved"
 
 
 @dataclass(frozen=True)
@@ -126,23 +126,41 @@ def build_primary_claim(groups: Sequence[RunGroup], primary: Sequence[tuple[str,
     return PrimaryClaim(tuple(tests), tuple(planned_seeds), permutations, resamples, after)
 
 
-def _p(value: float | None) -> str:
-    return "" if value is None else f"{value:.4f}"
+PRIMARY_CLAIM_COLUMNS = ("configuration", "baseline", "hypothesis", "tasks", "difference",
+                         "bootstrap_low", "bootstrap_high", "p_permutation", "p_holm",
+                         "p_paired", "verdict")
+
+
+def primary_claim_rows(claim: PrimaryClaim) -> Table:
+    """One row per pair tested (:data:`PRIMARY_CLAIM_COLUMNS`)."""
+    return Table(PRIMARY_CLAIM_COLUMNS, [
+        {"configuration": each.label, "baseline": each.baseline,
+         "hypothesis": "primary" if each.primary else "secondary",
+         "tasks": " ".join(each.tasks), "difference": each.difference,
+         "bootstrap_low": each.low, "bootstrap_high": each.high,
+         "p_permutation": each.p_value, "p_holm": each.adjusted_p, "p_paired": each.paired_p,
+         "verdict": each.verdict} for each in claim.tests])
+
+
+def _p(header: str, name: str) -> Column:
+    return Column(header, lambda row: EMPTY_CELL if row[name] is None else f"{row[name]:.4f}")
 
 
 def primary_claim_markdown(claim: PrimaryClaim) -> str:
     """The section: one row per pair, then how it was tested."""
-    rows = [[f"{each.label} − {each.baseline}", "primary" if each.primary else "secondary",
-             str(len(each.tasks)), f"{each.difference:+.1f} [{each.low:+.1f}, {each.high:+.1f}]",
-             _p(each.p_value), _p(each.adjusted_p) or "—", _p(each.paired_p), each.verdict]
-            for each in claim.tests]
+    table = primary_claim_rows(claim).markdown(columns=[
+        Column("Pair", lambda row: f"{row['configuration']} − {row['baseline']}"),
+        field_column("Hypothesis", "hypothesis"),
+        Column("Tasks", lambda row: str(len(row["tasks"].split()))),
+        Column("Δ mean RAS over tasks [95% bootstrap]",
+               lambda row: f"{row['difference']:+.1f} [{row['bootstrap_low']:+.1f}, "
+                           f"{row['bootstrap_high']:+.1f}]"),
+        _p("p (stratified permutation)", "p_permutation"), _p("p (Holm)", "p_holm"),
+        _p("p (paired, sensitivity)", "p_paired"), field_column("Verdict", "verdict")])
     seeds = ", ".join(map(str, claim.planned_seeds))
     tasks = ", ".join(claim.tests[0].tasks)
     text = [
-        "## The primary claim (registered analysis plan)", "",
-        markdown_table(["Pair", "Hypothesis", "Tasks", "Δ mean RAS over tasks [95% bootstrap]",
-                        "p (stratified permutation)", "p (Holm)", "p (paired, sensitivity)",
-                        "Verdict"], rows), "",
+        "## The primary claim (registered analysis plan)", "", table, "",
         f"Tasks: {tasks}; seeds {seeds} only. Δ: the mean over the tasks of the difference of "
         f"mean RAS, in points. The test shuffles each task's runs between the two labels, the "
         f"tasks independently ({claim.permutations:,} permutations; unpaired, as the plan "
@@ -155,18 +173,3 @@ def primary_claim_markdown(claim: PrimaryClaim) -> str:
         text += ["", "Runs of seeds outside the plan (added after looking), in no test here: "
                  + "; ".join(claim.after_looking) + "."]
     return "\n".join(text) + "\n"
-
-
-PRIMARY_CLAIM_COLUMNS = ("configuration", "baseline", "hypothesis", "tasks", "difference",
-                         "bootstrap_low", "bootstrap_high", "p_permutation", "p_holm",
-                         "p_paired", "verdict")
-
-
-def primary_claim_rows(claim: PrimaryClaim) -> list[dict[str, str]]:
-    return [{"configuration": each.label, "baseline": each.baseline,
-             "hypothesis": "primary" if each.primary else "secondary",
-             "tasks": " ".join(each.tasks), "difference": f"{each.difference:.10g}",
-             "bootstrap_low": f"{each.low:.10g}", "bootstrap_high": f"{each.high:.10g}",
-             "p_permutation": f"{each.p_value:.10g}", "p_holm": _p(each.adjusted_p),
-             "p_paired": f"{each.paired_p:.10g}", "verdict": each.verdict}
-            for each in claim.tests]

@@ -1,22 +1,26 @@
-"""Markdown and CSV renderings of the report's tables.
+"""The report's tables, each one row model (:class:`~temporal_torchrl.reports.rows.Table`)
+written to CSV and to Markdown by one renderer, so that the two cannot disagree.
 
-:class:`~temporal_torchrl.reports.aggregate.MetricTable` (:func:`table_markdown`,
-:func:`table_rows`) follows the thesis's tables: tasks as rows, configurations as columns,
-``mean ± std (n=seeds)``, an Average row, the best value of each row in bold (lowest TTFS /
-TT50S, highest RAS; only cells whose runs all have a value compete). Censored TTFS / TT50S runs
-count at the horizon and are named in their cell with the median beside the mean
-(``n=4; 1 censored > 200 ep, counted 1000; median 151``); runs without a value are written out
-in their cell (``1 incomplete: 120/300 ep``), never as a number. The CSV has one row per cell
-with the thesis's published value and the difference, its interval and its reading where the
-configuration matches.
+- :func:`metric_rows`: a :class:`~temporal_torchrl.reports.aggregate.MetricTable`, one row per
+  cell with, where the thesis reports the configuration, its value, the difference and its
+  interval and reading; the Markdown (:func:`table_markdown`) follows the thesis's layout:
+  tasks as rows, configurations as columns, ``mean ± std (n=seeds)``, an Average row, the best
+  value of each row in bold (lowest TTFS / TT50S, highest RAS; only cells whose runs all have a
+  value compete). A TTFS / TT50S cell gives its Kaplan-Meier median and the runs that reached
+  the event, and no mean when a run is censored; runs without a value are written out in their
+  cell (``1 incomplete: 120/300 ep``), never as a number. Below it, the rows the thesis reports,
+  beside its values.
+- :func:`reliable_rows`: a :class:`~temporal_torchrl.reports.reliable.ReliableTable`, one row per
+  configuration, its IQM and mean of normalised scores over tasks and seeds and its probability
+  of improvement over the baseline, each with its 95% CI, then the probabilities asked for
+  (:func:`reliable_markdown`).
+- :func:`task_comparison_rows`: one row per pair of configurations and task, the difference of
+  their RAS with its intervals and the run pairs won (:func:`task_comparison_markdown`).
+- :func:`run_rows`: one row per run (CSV only).
 
-:class:`~temporal_torchrl.reports.reliable.ReliableTable` (:func:`reliable_markdown`,
-:func:`reliable_rows`): one row per configuration, its IQM and mean of normalised scores over
-tasks and seeds and its probability of improvement over the baseline, each with its 95% CI.
-
-:class:`~temporal_torchrl.reports.task_comparison.TaskComparison`
-(:func:`task_comparison_markdown`, :func:`task_comparison_rows`): one row per pair of
-configurations and task, the difference of their RAS with its intervals and the run pairs won.
+A difference's numbers sit in its row's fields (:func:`difference_fields`); its Markdown is
+:meth:`~temporal_torchrl.reports.statistics.Difference.describe` of the difference those fields
+hold (:func:`difference_of`).
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from temporal_torchrl.reports.aggregate import (
     run_value,
 )
 from temporal_torchrl.reports.groups import RunGroup, distinguishing_keys
-from temporal_torchrl.reports.published import PUBLISHED_ENCODER, PublishedCell
+from temporal_torchrl.reports.published import PUBLISHED_ENCODER
 from temporal_torchrl.reports.reliable import (
     Improvement,
     Interval,
@@ -42,34 +46,81 @@ from temporal_torchrl.reports.reliable import (
     Scores,
     score_rule,
 )
-from temporal_torchrl.reports.statistics import reading_legend
+from temporal_torchrl.reports.rows import (
+    EMPTY_CELL,
+    Column,
+    Row,
+    Table,
+    Value,
+    field_column,
+    markdown_table,
+)
+from temporal_torchrl.reports.statistics import Difference, reading_legend
+from temporal_torchrl.reports.task_comparison import FAMILY as COMPARISONS
 from temporal_torchrl.reports.task_comparison import TaskComparison
-from temporal_torchrl.reports.thesis_comparison import ThesisComparison
 from temporal_torchrl.rewards.config import has_vlm_reward
 
-CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "median", "reached", "censored",
-               "best", "status", "without_value", "published_tables", "published_mean",
-               "published_std", "difference", "difference_ci95_low", "difference_ci95_high",
-               "reading")
-RELIABLE_COLUMNS = ("metric", "configuration", "tasks", "runs_scored", "censored_as_zero",
-                    "unscored", "iqm", "iqm_ci95_low", "iqm_ci95_high", "mean", "mean_ci95_low",
-                    "mean_ci95_high", "baseline", "p_improvement", "p_improvement_ci95_low",
-                    "p_improvement_ci95_high", "p_improvement_tasks", "note")
-TASK_COMPARISON_COLUMNS = ("configuration", "baseline", "task", "n", "baseline_n", "difference",
-                           "difference_ci95_low", "difference_ci95_high", "p_value",
-                           "comparisons", "difference_adjusted_low",
-                           "difference_adjusted_high", "pairs_won", "pairs", "reading")
+#: A Difference's fields in a row (:func:`difference_fields`), after ``difference``.
+DIFFERENCE_COLUMNS = ("difference", "difference_ci95_low", "difference_ci95_high",
+                      "difference_adjusted_low", "difference_adjusted_high",
+                      "difference_ci90_low", "difference_ci90_high", "p_value",
+                      "degrees_of_freedom", "comparisons", "margin")
+CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "median", "reached",
+               "censored", "censored_episodes", "best", "status", "pending", "without_value",
+               "published_tables", "published_mean", "published_std", "note",
+               *DIFFERENCE_COLUMNS, "std_assumed", "reading")
+RELIABLE_COLUMNS = ("metric", "kind", "configuration", "tasks", "runs_scored", "censored_as_zero",
+                    "unscored", "incomplete", "without_budget", "iqm", "iqm_ci95_low",
+                    "iqm_ci95_high", "mean", "mean_ci95_low", "mean_ci95_high", "baseline",
+                    "p_improvement", "p_improvement_ci95_low", "p_improvement_ci95_high",
+                    "p_improvement_tasks", "note")
+TASK_COMPARISON_COLUMNS = ("configuration", "baseline", "task", "n", "baseline_n",
+                           *DIFFERENCE_COLUMNS, "pairs_won", "pairs", "reading")
 RUN_COLUMNS = ("configuration", "task", "seed", "episodes", "finished", *METRICS, "commits",
                "path")
 #: A run's commits when it recorded none (it ran before ``provenance.json``).
 NOT_RECORDED = "not recorded"
-EMPTY_CELL = "—"
+#: The task of a table's Average row.
+AVERAGE = "Average"
 
 
 def _number(value: float, decimals: int) -> str:
     return f"{value:.{decimals}f}"
 
 
+def _bold(text: str, bold: bool) -> str:
+    return f"**{text}**" if bold else text
+
+
+def difference_fields(difference: Difference | None) -> dict[str, Value]:
+    """A difference's fields in a row (:data:`DIFFERENCE_COLUMNS` and ``reading``); None:
+    the row has none."""
+    if difference is None:
+        return {}
+    return {"difference": difference.difference, "difference_ci95_low": difference.low,
+            "difference_ci95_high": difference.high,
+            "difference_adjusted_low": difference.adjusted_low,
+            "difference_adjusted_high": difference.adjusted_high,
+            "difference_ci90_low": difference.equivalence_low,
+            "difference_ci90_high": difference.equivalence_high,
+            "p_value": difference.p_value, "degrees_of_freedom": difference.degrees_of_freedom,
+            "comparisons": difference.comparisons, "margin": difference.margin,
+            "reading": difference.verdict}
+
+
+def difference_of(row: Row) -> Difference | None:
+    """The :class:`~temporal_torchrl.reports.statistics.Difference` a row's fields hold, or
+    None (the row has no interval)."""
+    if row.get("difference_ci95_low") is None:
+        return None
+    return Difference(row["difference"], row["difference_ci95_low"],
+                      row["difference_ci95_high"], row["difference_adjusted_low"],
+                      row["difference_adjusted_high"], row["difference_ci90_low"],
+                      row["difference_ci90_high"], row["p_value"], row["degrees_of_freedom"],
+                      row["comparisons"], row["margin"])
+
+
+# ------------------------------------------------------------------- the per-metric tables
 def _pending_text(pending: Sequence[RunValue]) -> str:
     """``2 incomplete: 120, 85/300 ep``; ``2 without RAS budget``."""
     parts = []
@@ -83,36 +134,6 @@ def _pending_text(pending: Sequence[RunValue]) -> str:
     return "; ".join(parts)
 
 
-def _censored_text(cell: Cell) -> str:
-    """``1 censored > 200 ep``: the runs that stopped before the horizon without the event."""
-    episodes = ", ".join(str(value.run.episodes) for value in cell.censored)
-    return f"{len(cell.censored)} censored > {episodes} ep"
-
-
-def cell_text(cell: Cell | None, decimals: int, *, bold: bool = False) -> str:
-    """A Markdown cell: ``**41.7 ± 3.2** (n=4)``; a TTFS or TT50S cell with its Kaplan-Meier
-    median and the runs that reached it, and its censored runs instead of a mean when it has
-    any; the runs that have no value after it."""
-    if cell is None:
-        return EMPTY_CELL
-    parts = []
-    if cell.mean is not None:
-        value = _number(cell.mean, decimals)
-        if cell.std is not None:
-            value += f" ± {_number(cell.std, decimals)}"
-        count = f"n={len(cell.values)}"
-        estimate = cell.time_to_event
-        if estimate is not None and estimate.reached < estimate.runs:  # some at the horizon
-            count += f"; {estimate.describe(decimals)}, Kaplan-Meier"
-        parts.append(f"{f'**{value}**' if bold else value} ({count})")
-    elif cell.time_to_event is not None and cell.time_to_event.runs:
-        parts.append(f"{cell.time_to_event.describe(decimals)}, Kaplan-Meier; "
-                     f"{_censored_text(cell)}; no mean")
-    if cell.pending:
-        parts.append(_pending_text(cell.pending))
-    return "; ".join(parts)
-
-
 def cell_status(cell: Cell) -> str:
     """``complete``, ``partial`` (some runs without a value) or why none has one."""
     if cell.complete:
@@ -122,44 +143,51 @@ def cell_status(cell: Cell) -> str:
     return "+".join(sorted({value.status for value in cell.pending}))
 
 
-def published_text(cell: PublishedCell, decimals: int) -> str:
-    text = _number(cell.mean, decimals)
-    return text if cell.std is None else f"{text} ± {_number(cell.std, decimals)}"
+def cell_fields(cell: Cell) -> dict[str, Value]:
+    """A cell's fields in a row: its runs, values and statistics."""
+    estimate = cell.time_to_event
+    return {"runs": len(cell.runs), "n": len(cell.values), "mean": cell.mean, "std": cell.std,
+            "median": estimate.median if estimate is not None else None,
+            "reached": estimate.reached if estimate is not None else None,
+            "censored": len(cell.censored),
+            "censored_episodes": ", ".join(str(value.run.episodes) for value in cell.censored),
+            "status": cell_status(cell), "pending": _pending_text(cell.pending),
+            "without_value": "; ".join(f"seed {value.run.seed}: {value.describe()}"
+                                       for value in cell.pending)}
 
 
-def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines)
+def _time_to_event_text(row: Row, decimals: int) -> str:
+    """``median 145 (3 of 4 reached)``: the row's Kaplan-Meier estimate."""
+    median = row["median"]
+    runs = row["n"] + row["censored"]
+    median = "not reached" if median is None else _number(median, decimals)
+    return f"median {median} ({row['reached']} of {runs} reached)"
 
 
-def table_markdown(table: MetricTable) -> str:
-    """The thesis-layout table of one metric, then its comparison with the thesis."""
-    decimals = table.metric.decimals
-    labels = [group.label for group in table.groups]
-    rows = []
-    for task in table.tasks:
-        best = table.best(task)
-        rows.append([task, *(cell_text(table.cells.get((task, label)), decimals,
-                                       bold=label in best) for label in labels)])
-    best = table.best(None)
-    average = []
-    for label in labels:
-        if label in table.averages:
-            text = _number(table.averages[label], decimals)
-            average.append(f"**{text}**" if label in best else text)
-        else:
-            average.append(EMPTY_CELL)
-    rows.append(["Average", *average])
-    parts = [f"### {table.metric.title}", "",
-             markdown_table(["Task", *labels], rows), "",
-             "Mean ± sample std over seeds (n = seeds with a value); best complete value of each "
-             "row in bold. Average: mean of the task means, only for configurations with every "
-             "task's runs complete."]
-    comparison = published_markdown(table)
-    if comparison:
-        parts += ["", comparison]
-    return "\n".join(parts) + "\n"
+def cell_text(row: Row, decimals: int, *, bold: bool = False) -> str:
+    """A cell's Markdown from its row: ``**41.7 ± 3.2** (n=4)``; a TTFS or TT50S cell with its
+    Kaplan-Meier median and the runs that reached it, and its censored runs instead of a mean
+    when it has any; the runs that have no value after it."""
+    parts = []
+    if row["mean"] is not None:
+        value = _number(row["mean"], decimals)
+        if row["std"] is not None:
+            value += f" ± {_number(row['std'], decimals)}"
+        count = f"n={row['n']}"
+        if row["reached"] is not None and row["reached"] < row["n"] + row["censored"]:
+            count += f"; {_time_to_event_text(row, decimals)}, Kaplan-Meier"
+        parts.append(f"{_bold(value, bold)} ({count})")
+    elif row["reached"] is not None and row["n"] + row["censored"]:
+        parts.append(f"{_time_to_event_text(row, decimals)}, Kaplan-Meier; {row['censored']} "
+                     f"censored > {row['censored_episodes']} ep; no mean")
+    if row["pending"]:
+        parts.append(row["pending"])
+    return "; ".join(parts)
+
+
+def published_text(mean: float, std: float | None, decimals: int) -> str:
+    text = _number(mean, decimals)
+    return text if std is None else f"{text} ± {_number(std, decimals)}"
 
 
 def _notes(table: MetricTable, group: RunGroup) -> str:
@@ -173,80 +201,10 @@ def _notes(table: MetricTable, group: RunGroup) -> str:
     return "; ".join(notes)
 
 
-def _difference(ours: float, published: float, decimals: int) -> str:
-    return f"{ours - published:+.{decimals}f}"
-
-
-def published_markdown(table: MetricTable) -> str:
-    """Configurations the thesis reports, side by side with its values and the difference with
-    its interval and reading (:mod:`~temporal_torchrl.reports.thesis_comparison`); empty if the
-    thesis reports none of them."""
-    decimals = table.metric.decimals
-    comparisons = table.thesis_comparisons()
-    rows, assumed = [], False
-    for group in table.groups:
-        result = table.published.get(group.label)
-        if result is None:
-            continue
-        tables, notes = ", ".join(result.tables), _notes(table, group)
-        for task in table.tasks:
-            cell = table.cells.get((task, group.label))
-            if cell is None or task not in result.cells:
-                continue
-            published = result.cells[task]
-            comparison = comparisons.get((task, group.label))
-            if comparison is not None:
-                difference = comparison.describe(decimals)
-                assumed |= comparison.std_assumed
-            elif cell.complete:
-                difference = _difference(cell.mean, published.mean, decimals)
-            else:
-                difference = EMPTY_CELL
-            rows.append([group.label, task, cell_text(cell, decimals),
-                         published_text(published, decimals), difference, tables, notes])
-        if set(table.tasks) == set(result.cells) and group.label in table.averages:
-            ours = table.averages[group.label]
-            rows.append([group.label, "Average", _number(ours, decimals),
-                         _number(result.average, decimals),
-                         _difference(ours, result.average, decimals), tables, notes])
-    if not rows:
-        return ""
-    header = ["Configuration", "Task", "This report", "Thesis",
-              "Δ (report − thesis) [95% CI]: reading", "Thesis tables", "Note"]
-    if not any(row[-1] for row in rows):
-        header, rows = header[:-1], [row[:-1] for row in rows]
-    text = ("The thesis's values are LIV's, 4 seeds; matched on the reward variants, rho, lambda, "
-            "baseline, alpha and protocol. Δ only where every run of the cell has a value; its "
-            "interval is Welch's, the thesis's mean counted as 4 seeds")
-    text += (" with a spread like ours where the thesis prints no std" if assumed else "")
-    text += (f". {reading_legend(len(comparisons), table.metric.equivalence_margin)}"
-             if comparisons else ".")
-    return "\n".join([f"#### {table.metric.title}: compared with the thesis", "",
-                      markdown_table(header, rows), "", text])
-
-
-def _optional(value: float | None) -> str:
-    return "" if value is None else f"{value:.10g}"
-
-
-def _comparison_fields(comparison: ThesisComparison | None) -> dict[str, str]:
-    if comparison is None:
-        return {"difference_ci95_low": "", "difference_ci95_high": "", "reading": ""}
-    return {"difference_ci95_low": _optional(comparison.low),
-            "difference_ci95_high": _optional(comparison.high), "reading": comparison.verdict}
-
-
-def _time_to_event_fields(cell: Cell) -> dict[str, str]:
-    """``median`` (Kaplan-Meier; empty when not reached) and ``reached`` (runs with the event)
-    of a TTFS or TT50S cell; empty for RAS."""
-    estimate = cell.time_to_event
-    if estimate is None:
-        return {"median": "", "reached": ""}
-    return {"median": _optional(estimate.median), "reached": str(estimate.reached)}
-
-
-def table_rows(table: MetricTable) -> list[dict[str, str]]:
-    """The CSV rows of ``table`` (:data:`CSV_COLUMNS`), cells then the Average rows."""
+def metric_rows(table: MetricTable) -> Table:
+    """One row per cell (:data:`CSV_COLUMNS`), then the Average rows; where the thesis reports
+    the configuration, its value, the difference and, where comparable, its interval and
+    reading (:mod:`~temporal_torchrl.reports.thesis_comparison`)."""
     rows, comparisons = [], table.thesis_comparisons()
     for task in table.tasks:
         best = table.best(task)
@@ -254,40 +212,98 @@ def table_rows(table: MetricTable) -> list[dict[str, str]]:
             cell = table.cells.get((task, group.label))
             if cell is None:
                 continue
+            row = {"task": task, "configuration": group.label, **cell_fields(cell),
+                   "best": group.label in best}
             result = table.published.get(group.label)
             published = result.cells.get(task) if result is not None else None
-            rows.append({
-                "task": task, "configuration": group.label, "runs": str(len(cell.runs)),
-                "n": str(len(cell.values)), "mean": _optional(cell.mean),
-                "std": _optional(cell.std), **_time_to_event_fields(cell),
-                "censored": str(len(cell.censored)),
-                "best": str(group.label in best).lower(), "status": cell_status(cell),
-                "without_value": "; ".join(f"seed {value.run.seed}: {value.describe()}"
-                                           for value in cell.pending),
-                "published_tables": " ".join(result.tables) if published else "",
-                "published_mean": _optional(published.mean if published else None),
-                "published_std": _optional(published.std if published else None),
-                "difference": (_optional(cell.mean - published.mean)
-                               if published and cell.complete else ""),
-                **_comparison_fields(comparisons.get((task, group.label)))})
+            if published is not None:
+                comparison = comparisons.get((task, group.label))
+                row.update({"published_tables": " ".join(result.tables),
+                            "published_mean": published.mean, "published_std": published.std,
+                            "note": _notes(table, group),
+                            "difference": (cell.mean - published.mean
+                                           if cell.complete else None),
+                            **difference_fields(comparison)})
+                if comparison is not None:
+                    row["std_assumed"] = comparison.std_assumed
+            rows.append(row)
     best = table.best(None)
     for group in table.groups:
         average = table.averages.get(group.label)
         if average is None:
             continue
+        row = {"task": AVERAGE, "configuration": group.label, "runs": len(group.runs),
+               "mean": average, "best": group.label in best, "status": "complete"}
         result = table.published.get(group.label)
-        comparable = result is not None and set(table.tasks) == set(result.cells)
-        rows.append({
-            "task": "Average", "configuration": group.label, "runs": str(len(group.runs)),
-            "n": "", "mean": _optional(average), "std": "", "median": "", "reached": "",
-            "censored": "",
-            "best": str(group.label in best).lower(), "status": "complete", "without_value": "",
-            "published_tables": " ".join(result.tables) if comparable else "",
-            "published_mean": _optional(result.average if comparable else None),
-            "published_std": "",
-            "difference": _optional(average - result.average) if comparable else "",
-            **_comparison_fields(None)})
-    return rows
+        if result is not None and set(table.tasks) == set(result.cells):
+            row.update({"published_tables": " ".join(result.tables),
+                        "published_mean": result.average, "note": _notes(table, group),
+                        "difference": average - result.average})
+        rows.append(row)
+    return Table(CSV_COLUMNS, rows)
+
+
+def table_markdown(table: MetricTable) -> str:
+    """The thesis-layout table of one metric, then its comparison with the thesis."""
+    decimals = table.metric.decimals
+    rows = metric_rows(table)
+
+    def text(row: Row) -> str:
+        if row["task"] == AVERAGE:
+            return _bold(_number(row["mean"], decimals), row["best"])
+        return cell_text(row, decimals, bold=row["best"])
+
+    parts = [f"### {table.metric.title}", "",
+             rows.pivot_markdown("task", "configuration", text, header="Task",
+                                 lines=[*table.tasks, AVERAGE],
+                                 pivots=[group.label for group in table.groups]), "",
+             "Mean ± sample std over seeds (n = seeds with a value); best complete value of each "
+             "row in bold. Average: mean of the task means, only for configurations with every "
+             "task's runs complete."]
+    comparison = published_markdown(table, rows)
+    if comparison:
+        parts += ["", comparison]
+    return "\n".join(parts) + "\n"
+
+
+def published_markdown(table: MetricTable, rows: Table) -> str:
+    """The rows the thesis reports, configuration by configuration, beside its values with the
+    difference, its interval and reading; empty if the thesis reports none of them."""
+    decimals = table.metric.decimals
+    order = [group.label for group in table.groups]
+    shown = sorted((row for row in rows.rows if row.get("published_mean") is not None),
+                   key=lambda row: order.index(row["configuration"]))
+    if not shown:
+        return ""
+
+    def ours(row: Row) -> str:
+        return (_number(row["mean"], decimals) if row["task"] == AVERAGE
+                else cell_text(row, decimals))
+
+    def difference(row: Row) -> str:
+        welch = difference_of(row)
+        if welch is not None:
+            return welch.describe(decimals)
+        return EMPTY_CELL if row["difference"] is None else f"{row['difference']:+.{decimals}f}"
+
+    columns = [field_column("Configuration", "configuration"), field_column("Task", "task"),
+               Column("This report", ours),
+               Column("Thesis", lambda row: published_text(row["published_mean"],
+                                                           row.get("published_std"), decimals)),
+               Column("Δ (report − thesis) [95% CI]: reading", difference),
+               Column("Thesis tables", lambda row: ", ".join(row["published_tables"].split()))]
+    if any(row["note"] for row in shown):
+        columns.append(Column("Note", lambda row: row["note"]))
+    compared = [row for row in rows.rows if row.get("reading") is not None]
+    text = ("The thesis's values are LIV's, 4 seeds; matched on the reward variants, rho, lambda, "
+            "baseline, alpha and protocol. Δ only where every run of the cell has a value; its "
+            "interval is Welch's, the thesis's mean counted as 4 seeds")
+    text += (" with a spread like ours where the thesis prints no std"
+             if any(row.get("std_assumed") for row in compared) else "")
+    text += (f". {reading_legend(len(compared), table.metric.equivalence_margin)}"
+             if compared else ".")
+    return "\n".join([f"#### {table.metric.title}: compared with the thesis", "",
+                      Table(rows.fields, shown).markdown(columns=columns), "", text])
 
 
 def relative_run_path(path: Path, roots: Sequence[Path]) -> str:
@@ -307,7 +323,7 @@ def relative_run_path(path: Path, roots: Sequence[Path]) -> str:
     return Path(*resolved.parts[-3:]).as_posix()
 
 
-def run_rows(groups: Sequence[RunGroup], roots: Sequence[Path]) -> list[dict[str, str]]:
+def run_rows(groups: Sequence[RunGroup], roots: Sequence[Path]) -> Table:
     """One row per run (:data:`RUN_COLUMNS`): its metrics, or why it has none. Its path is
     written relative to the one of ``roots`` (the directories given to the report) it is in,
     so that the table holds no machine's paths; with several roots it starts with that root's
@@ -315,8 +331,8 @@ def run_rows(groups: Sequence[RunGroup], roots: Sequence[Path]) -> list[dict[str
     rows = []
     for group in groups:
         for run in group.runs:
-            row = {"configuration": group.label, "task": run.task, "seed": str(run.seed),
-                   "episodes": str(run.episodes), "finished": str(run.finished).lower(),
+            row = {"configuration": group.label, "task": run.task, "seed": run.seed,
+                   "episodes": run.episodes, "finished": run.finished,
                    "commits": " ".join(run.commits) or NOT_RECORDED,
                    "path": relative_run_path(run.path, roots)}
             for metric in METRICS:
@@ -324,7 +340,7 @@ def run_rows(groups: Sequence[RunGroup], roots: Sequence[Path]) -> list[dict[str
                 row[metric] = (value.describe() if value.value is not None
                                else f"{value.status}: {value.describe()}")
             rows.append(row)
-    return rows
+    return Table(RUN_COLUMNS, rows)
 
 
 def grouping_markdown(groups: Sequence[RunGroup]) -> str:
@@ -342,36 +358,77 @@ def grouping_markdown(groups: Sequence[RunGroup]) -> str:
 
 
 # --------------------------------------------------------------------------- rliable aggregates
-def _interval_text(interval: Interval | None) -> str:
+#: A row of the rliable table: a configuration's aggregates, or a probability asked for.
+CONFIGURATION_ROW, PAIR_ROW = "configuration", "pair"
+
+
+def interval_fields(prefix: str, interval: Interval | None) -> dict[str, Value]:
+    """An interval's fields in a row: ``prefix``, ``prefix_ci95_low``, ``prefix_ci95_high``."""
     if interval is None:
+        return {}
+    return {prefix: interval.estimate, f"{prefix}_ci95_low": interval.low,
+            f"{prefix}_ci95_high": interval.high}
+
+
+def interval_text(row: Row, prefix: str) -> str:
+    """``0.80 [0.74, 0.84]`` from a row's interval fields; — without."""
+    if row.get(prefix) is None:
         return EMPTY_CELL
-    return f"{interval.estimate:.2f} [{interval.low:.2f}, {interval.high:.2f}]"
+    return f"{row[prefix]:.2f} [{row[f'{prefix}_ci95_low']:.2f}, {row[f'{prefix}_ci95_high']:.2f}]"
 
 
-def _runs_text(scores: Scores) -> str:
+def reliable_rows(table: ReliableTable) -> Table:
+    """One row per configuration (:data:`RELIABLE_COLUMNS`), its IQM, mean and probability of
+    improvement over the baseline, then one per probability asked for (``kind`` pair)."""
+    rows = []
+    for label, scores in table.scores.items():
+        improvement = table.improvements.get(label)
+        note = (table.no_baseline if table.no_baseline is not None
+                else improvement.reason if improvement is not None else None)
+        rows.append({
+            "metric": table.metric.name, "kind": CONFIGURATION_ROW, "configuration": label,
+            "tasks": " ".join(scores.tasks), "runs_scored": scores.scored,
+            "censored_as_zero": scores.censored, "unscored": len(scores.unscored),
+            "incomplete": sum(run.status == INCOMPLETE for run in scores.unscored),
+            "without_budget": sum(run.status == UNDEFINED for run in scores.unscored),
+            **interval_fields("iqm", table.iqm.get(label)),
+            **interval_fields("mean", table.mean.get(label)),
+            "baseline": table.baseline,
+            **interval_fields("p_improvement",
+                              improvement.interval if improvement is not None else None),
+            "p_improvement_tasks": " ".join(improvement.tasks) if improvement else None,
+            "note": note})
+    for (x, y), improvement in table.pairs.items():
+        rows.append({"metric": table.metric.name, "kind": PAIR_ROW, "configuration": x,
+                     "baseline": y, **interval_fields("p_improvement", improvement.interval),
+                     "p_improvement_tasks": " ".join(improvement.tasks),
+                     "note": improvement.reason})
+    return Table(RELIABLE_COLUMNS, rows)
+
+
+def _runs_text(row: Row) -> str:
     """``4``, ``4 (1 censored → 0)``, ``0 (2 incomplete)``."""
     notes = []
-    if scores.censored:
-        notes.append(f"{scores.censored} censored → 0")
-    for status in (INCOMPLETE, UNDEFINED):
-        count = sum(run.status == status for run in scores.unscored)
-        if count:
-            notes.append(f"{count} {'without RAS budget' if status == UNDEFINED else status}")
-    return f"{scores.scored}" + (f" ({', '.join(notes)})" if notes else "")
+    if row["censored_as_zero"]:
+        notes.append(f"{row['censored_as_zero']} censored → 0")
+    if row["incomplete"]:
+        notes.append(f"{row['incomplete']} incomplete")
+    if row["without_budget"]:
+        notes.append(f"{row['without_budget']} without RAS budget")
+    return f"{row['runs_scored']}" + (f" ({', '.join(notes)})" if notes else "")
 
 
-def _improvement_text(table: ReliableTable, label: str) -> str:
-    if label == table.baseline:
+def _improvement_text(row: Row) -> str:
+    if row["configuration"] == row["baseline"]:
         return "baseline"
-    improvement = table.improvements.get(label)
-    if improvement is None:
+    if row["p_improvement_tasks"] is None:
         return EMPTY_CELL
-    if improvement.interval is None:
+    if row.get("p_improvement") is None:
         return f"{EMPTY_CELL} (no task in common)"
-    text = _interval_text(improvement.interval)
-    own = table.scores[label].tasks
-    if len(improvement.tasks) < len(own):
-        text += f" (on {len(improvement.tasks)} of its {len(own)} tasks)"
+    text = interval_text(row, "p_improvement")
+    common, own = len(row["p_improvement_tasks"].split()), len(row["tasks"].split())
+    if common < own:
+        text += f" (on {common} of its {own} tasks)"
     return text
 
 
@@ -379,19 +436,17 @@ def reliable_markdown(table: ReliableTable) -> str:
     """One metric's IQM, mean and probability of improvement per configuration, explained."""
     title = table.metric.title
     baseline = table.baseline
-    header = ["Configuration", "Tasks", "Runs scored", "IQM [95% CI]", "Mean [95% CI]"]
+    rows = reliable_rows(table)
+    columns = [field_column("Configuration", "configuration"),
+               Column("Tasks", lambda row: str(len(row["tasks"].split()))),
+               Column("Runs scored", _runs_text),
+               Column("IQM [95% CI]", lambda row: interval_text(row, "iqm")),
+               Column("Mean [95% CI]", lambda row: interval_text(row, "mean"))]
     if table.no_baseline is None:
-        header.append(f"P(X > {baseline}) [95% CI]")
-    rows = []
-    for label, scores in table.scores.items():
-        row = [label, str(len(scores.tasks)), _runs_text(scores),
-               _interval_text(table.iqm.get(label)), _interval_text(table.mean.get(label))]
-        if table.no_baseline is None:
-            row.append(_improvement_text(table, label))
-        rows.append(row)
+        columns.append(Column(f"P(X > {baseline}) [95% CI]", _improvement_text))
     rule = score_rule(table.metric.name, table.horizon)
     parts = [f"### {title}: over tasks and seeds (rliable)", "",
-             markdown_table(header, rows), "",
+             rows.markdown(lambda row: row["kind"] == CONFIGURATION_ROW, columns), "",
              f"Normalised scores in [0, 1], higher is better: {rule}. IQM: the mean of the "
              "middle 50% of all the configuration's run scores, tasks pooled; Mean: the mean of "
              "its task means."]
@@ -404,13 +459,19 @@ def reliable_markdown(table: ReliableTable) -> str:
                   f"interval is its point.")
     if table.no_baseline is not None:
         parts += ["", f"No probability of improvement: {table.no_baseline}."]
-    unmatched = [improvement for improvement in table.improvements.values()
-                 if improvement.interval is None]
+    unmatched = [row for row in rows.rows if row["kind"] == CONFIGURATION_ROW
+                 and row["p_improvement_tasks"] is not None and row.get("p_improvement") is None]
     if unmatched:
-        parts += [""] + [f"- {improvement.label}: {improvement.reason}." for improvement in
-                         unmatched]
+        parts += [""] + [f"- {row['configuration']}: {row['note']}." for row in unmatched]
     if table.pairs:
-        parts += ["", _pairs_markdown(table)]
+        parts += ["", f"#### {title}: probabilities of improvement asked for", "", rows.markdown(
+            lambda row: row["kind"] == PAIR_ROW,
+            [Column("Comparison", lambda row: f"P({row['configuration']} > {row['baseline']})"),
+             Column("Tasks in common", lambda row: ", ".join(row["p_improvement_tasks"].split())
+                    or EMPTY_CELL),
+             Column("P [95% CI]", lambda row: interval_text(row, "p_improvement")
+                    if row.get("p_improvement") is not None
+                    else f"{EMPTY_CELL} ({row['note']})")])]
     shown = {(each.label, each.baseline): each
              for each in [*table.improvements.values(), *table.pairs.values()]}
     degenerate = [note for improvement in shown.values()
@@ -418,17 +479,6 @@ def reliable_markdown(table: ReliableTable) -> str:
     if degenerate:
         parts += [""] + [f"- {note}" for note in degenerate]
     return "\n".join(parts) + "\n"
-
-
-def _pairs_markdown(table: ReliableTable) -> str:
-    rows = []
-    for (x, y), improvement in table.pairs.items():
-        tasks = ", ".join(improvement.tasks) if improvement.tasks else EMPTY_CELL
-        text = (_interval_text(improvement.interval) if improvement.interval is not None
-                else f"{EMPTY_CELL} ({improvement.reason})")
-        rows.append([f"P({x} > {y})", tasks, text])
-    return "\n".join([f"#### {table.metric.title}: probabilities of improvement asked for", "",
-                      markdown_table(["Comparison", "Tasks in common", "P [95% CI]"], rows)])
 
 
 def degenerate_note(improvement: Improvement, scores: dict[str, Scores]) -> str | None:
@@ -449,66 +499,43 @@ def degenerate_note(improvement: Improvement, scores: dict[str, Scores]) -> str 
             f"collapses onto them: this is what these runs show, not certainty.")
 
 
-def _interval_fields(prefix: str, interval: Interval | None) -> dict[str, str]:
-    return {prefix: _optional(interval.estimate if interval else None),
-            f"{prefix}_ci95_low": _optional(interval.low if interval else None),
-            f"{prefix}_ci95_high": _optional(interval.high if interval else None)}
+# ------------------------------------------------------------------ configurations on a task
+def task_comparison_rows(comparisons: Sequence[TaskComparison]) -> Table:
+    """One row per comparison (:data:`TASK_COMPARISON_COLUMNS`)."""
+    return Table(TASK_COMPARISON_COLUMNS, [
+        {"configuration": each.label, "baseline": each.baseline, "task": each.task,
+         "n": len(each.values), "baseline_n": len(each.baseline_values),
+         **difference_fields(each.welch), "difference": each.difference,
+         "comparisons": each.comparisons, "pairs_won": each.pairs_won, "pairs": each.pairs,
+         "reading": each.verdict if each.reason is None else f"{each.verdict} ({each.reason})"}
+        for each in comparisons])
 
 
-def reliable_rows(table: ReliableTable) -> list[dict[str, str]]:
-    """The CSV rows of ``table`` (:data:`RELIABLE_COLUMNS`), one per configuration."""
-    rows = []
-    for label, scores in table.scores.items():
-        improvement = table.improvements.get(label)
-        note = (table.no_baseline if table.no_baseline is not None
-                else improvement.reason if improvement is not None else None)
-        rows.append({
-            "metric": table.metric.name, "configuration": label,
-            "tasks": " ".join(scores.tasks),
-            "runs_scored": str(scores.scored), "censored_as_zero": str(scores.censored),
-            "unscored": str(len(scores.unscored)),
-            **_interval_fields("iqm", table.iqm.get(label)),
-            **_interval_fields("mean", table.mean.get(label)),
-            "baseline": table.baseline,
-            **_interval_fields("p_improvement",
-                               improvement.interval if improvement is not None else None),
-            "p_improvement_tasks": " ".join(improvement.tasks) if improvement else "",
-            "note": note or ""})
-    return rows
+def _comparison_text(row: Row) -> str:
+    """``+34.3 [+22.9, +45.8], p = 0.0008: above over 9 comparisons [+13.0, +55.6]``."""
+    welch = difference_of(row)
+    if welch is None:
+        return f"{row['difference']:+.1f}: {row['reading']}"
+    return welch.describe(family=COMPARISONS, p=True)
 
 
 def task_comparison_markdown(comparisons: Sequence[TaskComparison]) -> str:
     """The per-task comparisons of configurations, explained (empty when there is none)."""
     if not comparisons:
         return ""
-    rows = [[f"{each.label} − {each.baseline}", each.task,
-             f"{len(each.values)} · {len(each.baseline_values)}", each.describe(),
-             f"{each.pairs_won:g} of {each.pairs}"] for each in comparisons]
+    table = task_comparison_rows(comparisons).markdown(columns=[
+        Column("Comparison (X − Y)", lambda row: f"{row['configuration']} − {row['baseline']}"),
+        field_column("Task", "task"),
+        Column("Runs (X · Y)", lambda row: f"{row['n']} · {row['baseline_n']}"),
+        Column("Δ [95% CI], p: reading", _comparison_text),
+        Column("Run pairs X won", lambda row: f"{row['pairs_won']:g} of {row['pairs']}")])
     m = comparisons[0].comparisons
     return "\n".join([
-        "## RAS (%): configurations compared on each task", "",
-        markdown_table(["Comparison (X − Y)", "Task", "Runs (X · Y)",
-                        "Δ [95% CI], p: reading", "Run pairs X won"], rows), "",
+        "## RAS (%): configurations compared on each task", "", table, "",
         "Δ: X's mean RAS minus Y's, from unrounded means, with Welch's 95% interval and "
         "two-sided p (no equal-spread assumption). "
-        f"{reading_legend(m, None, 'comparisons of this table')} Run pairs X won: of the "
+        f"{reading_legend(m, None, f'{COMPARISONS} of this table')} Run pairs X won: of the "
         "pairs of a run of X and a run of Y on the task, those where X's RAS is higher (ties "
         "count half), rliable's P(X > Y) on this task times the number of pairs; all of them "
         "won is what these runs show, not certainty.",
         ""])
-
-
-def task_comparison_rows(comparisons: Sequence[TaskComparison]) -> list[dict[str, str]]:
-    """The CSV rows of ``comparisons`` (:data:`TASK_COMPARISON_COLUMNS`)."""
-    return [{"configuration": each.label, "baseline": each.baseline, "task": each.task,
-             "n": str(len(each.values)), "baseline_n": str(len(each.baseline_values)),
-             "difference": _optional(each.difference),
-             "difference_ci95_low": _optional(each.welch and each.welch.low),
-             "difference_ci95_high": _optional(each.welch and each.welch.high),
-             "p_value": _optional(each.welch and each.welch.p_value),
-             "comparisons": str(each.comparisons),
-             "difference_adjusted_low": _optional(each.welch and each.welch.adjusted_low),
-             "difference_adjusted_high": _optional(each.welch and each.welch.adjusted_high),
-             "pairs_won": f"{each.pairs_won:g}", "pairs": str(each.pairs),
-             "reading": each.verdict if each.reason is None
-             else f"{each.verdict} ({each.reason})"} for each in comparisons]

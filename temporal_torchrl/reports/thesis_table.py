@@ -33,11 +33,15 @@ from temporal_torchrl.reports.published import (
     PublishedTable,
     published_tables,
 )
+from temporal_torchrl.reports.rows import Column, Row, Table, field_column
 from temporal_torchrl.reports.statistics import reading_legend
 from temporal_torchrl.reports.tables import (
+    DIFFERENCE_COLUMNS,
     NOT_RECORDED,
+    cell_fields,
     cell_text,
-    markdown_table,
+    difference_fields,
+    difference_of,
     published_text,
 )
 from temporal_torchrl.reports.thesis_comparison import (
@@ -168,8 +172,58 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str,
                            averages, after_looking)
 
 
-def _ours_text(cell: Cell | None, decimals: int) -> str:
-    return NOT_RUN if cell is None else cell_text(cell, decimals)
+THESIS_TABLE_COLUMNS = ("task", "column", "page_column", "our_configuration", "runs", "n",
+                        "mean", "std", "median", "reached", "censored", "censored_episodes",
+                        "status", "pending", "without_value", "thesis_mean", "thesis_std",
+                        *DIFFERENCE_COLUMNS, "std_assumed", "reading", "commits")
+#: The ``task`` of the rows of the thesis's average over its six tasks.
+THESIS_AVERAGE = "the thesis's average"
+AVERAGE_PREFIX = "average of "
+
+
+def _commits_text(cell: Cell) -> str:
+    """The commits of the cell's runs, each once, in run order; the runs that recorded none."""
+    commits = dict.fromkeys(commit for value in cell.runs for commit in value.run.commits)
+    unrecorded = sum(not value.run.commits for value in cell.runs)
+    text = ", ".join(commits)
+    if unrecorded:
+        runs = f" ({unrecorded} run{'s' if unrecorded > 1 else ''})" if commits else ""
+        text += f"{'; ' if text else ''}{NOT_RECORDED}{runs}"
+    return text
+
+
+def thesis_table_rows(page: ThesisTablePage) -> Table:
+    """One row per task and column (:data:`THESIS_TABLE_COLUMNS`), then our averages over the
+    tasks run and the thesis's over its six."""
+    rows = []
+    for task in page.table.rows:
+        for column in page.columns:
+            cell, published = page.cells.get((task, column.key)), page.published(task, column)
+            row = {"task": task, "column": column.published.label, "page_column": column.key,
+                   "our_configuration": column.group.label if cell else NOT_RUN,
+                   "thesis_mean": published.mean, "thesis_std": published.std}
+            if cell is not None:
+                row.update(cell_fields(cell), commits=_commits_text(cell))
+            comparison = page.comparisons.get((task, column.key))
+            if comparison is not None:
+                row.update(difference_fields(comparison), std_assumed=comparison.std_assumed)
+            rows.append(row)
+    for column in page.columns:
+        average = page.averages.get(column.key)
+        if average is None:
+            continue
+        row = {"task": AVERAGE_PREFIX + " ".join(average.tasks),
+               "column": column.published.label, "page_column": column.key,
+               "our_configuration": column.group.label, "mean": average.ours,
+               "thesis_mean": average.thesis}
+        if average.comparison is not None:
+            row.update(difference_fields(average.comparison),
+                       std_assumed=average.comparison.std_assumed)
+        rows.append(row)
+    rows += [{"task": THESIS_AVERAGE, "column": column.published.label,
+              "page_column": column.key, "thesis_mean": page.table.average[column.index]}
+             for column in page.columns]
+    return Table(THESIS_TABLE_COLUMNS, rows)
 
 
 def _encoder_note(column: ThesisColumn) -> str:
@@ -179,45 +233,49 @@ def _encoder_note(column: ThesisColumn) -> str:
     return f"encoder {encoder}" if vlm and encoder != PUBLISHED_ENCODER else ""
 
 
+def _is_cell(row: Row) -> bool:
+    return row["task"] != THESIS_AVERAGE and not row["task"].startswith(AVERAGE_PREFIX)
+
+
+def _average_tasks(row: Row) -> list[str]:
+    return row["task"].removeprefix(AVERAGE_PREFIX).split()
+
+
 def thesis_table_markdown(page: ThesisTablePage) -> str:
-    """The page in Markdown: the table, the averages over the tasks run, the comparisons."""
+    """The page in Markdown: the table, the averages over the tasks run, the comparisons, the
+    commits; every part from :func:`thesis_table_rows`."""
     decimals = page.metric.decimals
-    header = ["Task", *(column.key for column in page.columns)]
-    rows = [[task, *(f"{_ours_text(page.cells.get((task, column.key)), decimals)} · thesis "
-                     f"{published_text(page.published(task, column), decimals)}"
-                     for column in page.columns)]
-            for task in page.table.rows]
-    average_row = ["Average over the tasks run"]
-    for column in page.columns:
-        average = page.averages.get(column.key)
-        average_row.append(NOT_RUN if average is None else (
-            f"{_rounded(average.ours, decimals)} ({len(average.tasks)} "
-            f"task{'s' if len(average.tasks) > 1 else ''}) · thesis "
-            f"{_rounded(average.thesis, decimals)}"))
-    rows.append(average_row)
-    rows.append(["Thesis's Average (its six tasks)", *(
-        f"thesis {_rounded(page.table.average[column.index], decimals)}"
-        for column in page.columns)])
+    rows = thesis_table_rows(page)
+    keys = [column.key for column in page.columns]
+    average_line, thesis_line = "Average over the tasks run", "Thesis's Average (its six tasks)"
+
+    def line(row: Row) -> str:
+        if row["task"] == THESIS_AVERAGE:
+            return thesis_line
+        return row["task"] if _is_cell(row) else average_line
+
+    def ours(row: Row) -> str:
+        if not _is_cell(row):
+            return _rounded(row["mean"], decimals)
+        return NOT_RUN if row.get("runs") is None else cell_text(row, decimals)
+
+    def text(row: Row) -> str:
+        thesis = published_text(row["thesis_mean"], row.get("thesis_std"), decimals)
+        if row["task"] == THESIS_AVERAGE:
+            return f"thesis {thesis}"
+        if _is_cell(row):
+            return f"{ours(row)} · thesis {thesis}"
+        tasks = len(_average_tasks(row))
+        return f"{ours(row)} ({tasks} task{'s' if tasks > 1 else ''}) · thesis {thesis}"
+
+    table = rows.pivot_markdown(line, "page_column", text, header="Task",
+                                lines=[*page.table.rows, average_line, thesis_line],
+                                pivots=keys, missing=NOT_RUN)
     notes = [f"- {column.key}: our runs are {column.group.label}, "
              f"{_encoder_note(column) or 'the thesis’s encoder'}." for column in page.columns
              if column.group is not None and _encoder_note(column)]
-    comparison_rows = []
-    for column in page.columns:
-        for task in page.table.rows:
-            comparison = page.comparisons.get((task, column.key))
-            if comparison is not None:
-                comparison_rows.append([column.key, task,
-                                        _ours_text(page.cells[task, column.key], decimals),
-                                        published_text(page.published(task, column), decimals),
-                                        comparison.describe(decimals)])
-        average = page.averages.get(column.key)
-        if average is not None and average.comparison is not None:
-            comparison_rows.append([column.key, f"average of {', '.join(average.tasks)}",
-                                    _rounded(average.ours, decimals),
-                                    _rounded(average.thesis, decimals),
-                                    average.comparison.describe(decimals)])
     parts = [f"## Thesis Table {page.table.number}: {page.metric.title}, ours beside the thesis",
-             "", f"Thesis: {page.table.caption}", "", markdown_table(header, rows), "",
+             "", f"Thesis: {page.table.caption}", "", table, "",
              "Ours: mean ± sample std over seeds (n); the thesis: its mean over 4 seeds with LIV. "
              "Average over the tasks run: our mean of task means over the tasks each column has "
              "complete runs on, beside the thesis's mean over the same tasks."]
@@ -227,84 +285,37 @@ def thesis_table_markdown(page: ThesisTablePage) -> str:
         parts += ["", "Left out of this page, as seeds added after looking (outside the plan's "
                   "seeds; the per-metric tables keep them): " + "; ".join(page.after_looking)
                   + "."]
-    if comparison_rows:
-        assumed = any(each.std_assumed for each in page.comparisons.values())
+    compared = sorted((row for row in rows.rows if row.get("reading") is not None),
+                      key=lambda row: keys.index(row["page_column"]))
+    if compared:
+        assumed = any(row["std_assumed"] for row in compared if _is_cell(row))
+        cells = sum(_is_cell(row) for row in compared)
+        comparison_table = Table(rows.fields, compared).markdown(columns=[
+            field_column("Column", "page_column"),
+            Column("Task", lambda row: row["task"] if _is_cell(row)
+                   else AVERAGE_PREFIX + ", ".join(_average_tasks(row))),
+            Column("Ours", ours),
+            Column("Thesis", lambda row: published_text(row["thesis_mean"],
+                                                        row.get("thesis_std"), decimals)
+                   if _is_cell(row) else _rounded(row["thesis_mean"], decimals)),
+            Column("Δ (ours − thesis) [95% CI]: reading",
+                   lambda row: difference_of(row).describe(decimals))])
         parts += ["", f"### Table {page.table.number}: compared with the thesis", "",
-                  markdown_table(["Column", "Task", "Ours", "Thesis",
-                                   "Δ (ours − thesis) [95% CI]: reading"], comparison_rows), "",
+                  comparison_table, "",
                   f"Δ from unrounded means; Welch's interval with the thesis's mean counted as 4 "
                   f"seeds{' with a spread like ours (the thesis prints no std)' if assumed else ''}"
-                  f". {reading_legend(len(page.comparisons), page.metric.equivalence_margin)} "
+                  f". {reading_legend(cells, page.metric.equivalence_margin)} "
                   f"An average over several tasks is compared likewise, its table-wide "
                   f"interval over the averages compared."]
+    commits = Table(rows.fields, [row for row in rows.rows if row.get("runs") is not None
+                                  and _is_cell(row)])
+    commits = Table(rows.fields, sorted(commits.rows,
+                                        key=lambda row: keys.index(row["page_column"])))
     parts += ["", f"### Table {page.table.number}: the commits each cell's runs ran on", "",
-              markdown_table(["Column", "Task", "Commits"], commit_rows(page)), "",
+              commits.markdown(columns=[field_column("Column", "page_column"),
+                                        field_column("Task", "task"),
+                                        field_column("Commits", "commits")]), "",
               f"From each run's provenance.json (first 12 hex digits; +dirty: the tracked files "
               f"differed). *{NOT_RECORDED}*: the runs predate the record. A cell naming two "
               f"commits mixes them."]
     return "\n".join(parts) + "\n"
-
-
-def commit_rows(page: ThesisTablePage) -> list[list[str]]:
-    """Per column and task run, the commits of the cell's runs (each once, in run order)."""
-    rows = []
-    for column in page.columns:
-        for task in page.table.rows:
-            cell = page.cells.get((task, column.key))
-            if cell is None:
-                continue
-            commits = dict.fromkeys(commit for value in cell.runs
-                                    for commit in value.run.commits)
-            unrecorded = sum(not value.run.commits for value in cell.runs)
-            text = ", ".join(commits)
-            if unrecorded:
-                runs = f" ({unrecorded} run{'s' if unrecorded > 1 else ''})" if commits else ""
-                text += f"{'; ' if text else ''}{NOT_RECORDED}{runs}"
-            rows.append([column.key, task, text])
-    return rows
-
-
-THESIS_TABLE_COLUMNS = ("task", "column", "our_configuration", "n", "mean", "std", "thesis_mean",
-                        "thesis_std", "difference", "difference_ci95_low",
-                        "difference_ci95_high", "cells_compared", "adjusted_ci_low",
-                        "adjusted_ci_high", "reading")
-
-
-def thesis_table_rows(page: ThesisTablePage) -> list[dict[str, str]]:
-    """One CSV row per task and column (:data:`THESIS_TABLE_COLUMNS`), then the averages."""
-    def optional(value: float | None) -> str:
-        return "" if value is None else f"{value:.10g}"
-
-    def comparison_fields(comparison: ThesisComparison | None) -> dict[str, str]:
-        if comparison is None:
-            return dict.fromkeys(THESIS_TABLE_COLUMNS[8:], "")
-        return {"difference": optional(comparison.difference),
-                "difference_ci95_low": optional(comparison.low),
-                "difference_ci95_high": optional(comparison.high),
-                "cells_compared": str(comparison.comparisons),
-                "adjusted_ci_low": optional(comparison.adjusted_low),
-                "adjusted_ci_high": optional(comparison.adjusted_high),
-                "reading": comparison.verdict}
-
-    rows = []
-    for task in page.table.rows:
-        for column in page.columns:
-            cell, published = page.cells.get((task, column.key)), page.published(task, column)
-            rows.append({"task": task, "column": column.published.label,
-                         "our_configuration": column.group.label if cell else NOT_RUN,
-                         "n": str(len(cell.values)) if cell else "",
-                         "mean": optional(cell.mean if cell else None),
-                         "std": optional(cell.std if cell else None),
-                         "thesis_mean": optional(published.mean),
-                         "thesis_std": optional(published.std),
-                         **comparison_fields(page.comparisons.get((task, column.key)))})
-    for column in page.columns:
-        average = page.averages.get(column.key)
-        if average is not None:
-            rows.append({"task": "average of " + " ".join(average.tasks),
-                         "column": column.published.label,
-                         "our_configuration": column.group.label, "n": "",
-                         "mean": optional(average.ours), "std": "",
-                         "thesis_mean": optional(average.thesis), "thesis_std": "",
-                         **comparison_fields(average.comparison)})
-    return rows
