@@ -19,7 +19,8 @@ and writes into ``--out``:
   (default SAC) and P(X > Y) for each ``--compare X Y``, each with a 95% stratified-bootstrap
   CI, computed with rliable
   (:mod:`temporal_torchrl.reports.reliable`; scores: RAS / 100, and 1 - TTFS / 1000 with
-  runs that have not reached the success scored 0);
+  runs that have not reached the success ranked 0; no IQM or mean for a configuration with a
+  censored run);
 - ``comparisons.md``/``.csv``: each pair of configurations above (X over the baseline, each
   ``--compare X Y``) on each task both ran: the difference of their mean RAS with Welch's 95%
   interval, p-value and Bonferroni interval over all these comparisons, and the run pairs X won
@@ -134,11 +135,13 @@ HOW_TO_READ = """\
   before the runs) or *not resolved* (neither; an interval that includes 0 is not agreement).
 - *Over tasks and seeds (rliable)*: each configuration's runs on all its tasks, scored in
   [0, 1] (higher is better): RAS / 100; for TTFS and TT50S, 1 − TTFS / 1000, with a run that
-  has not reached the success (within 1,000 episodes, or censored before) scored 0, a lower
-  bound. The interquartile mean (IQM, the mean of the middle 50% of the run scores) and the
-  mean, and the probability of improvement P(X > {baseline}) (a run of X scores more than a run
-  of {baseline} on the same task), each with a 95% stratified-bootstrap CI ({resamples}
-  resamples, seed {seed}), as Agarwal et al. (NeurIPS 2021) recommend, computed with rliable.
+  has not reached the success (within 1,000 episodes, or censored before) ranked 0, below every
+  run that succeeded; a configuration with a censored run gets no IQM and no mean (they would
+  need a stand-in for its unobserved times). The interquartile mean (IQM, the mean of the
+  middle 50% of the run scores) and the mean, and the probability of improvement
+  P(X > {baseline}) (a run of X scores more than a run of {baseline} on the same task), each
+  with a 95% stratified-bootstrap CI ({resamples} resamples, seed {seed}), as Agarwal et al.
+  (NeurIPS 2021) recommend, computed with rliable.
 """
 
 
@@ -311,7 +314,7 @@ def main(argv: list[str] | None = None) -> None:
     figures = ["## Figures"]
     colours = configuration_colours(labels)
     for table in reliable:
-        if table.scored:
+        if table.iqm:
             name = f"aggregate_{table.metric.name}.png"
             plot_aggregate_intervals(table, args.out / name, colours)
             figures.append(f"![{table.metric.title}: IQM and mean with 95% CIs]({name})")

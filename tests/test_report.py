@@ -380,11 +380,19 @@ def test_scores_of_ras_and_of_ttfs_with_censored_runs_at_zero(tmp_path):
     table = build_reliable_table([group], "ttfs", reps=200)
     scores = table.scores[group.label]
     assert (scores.scored, scores.censored, len(scores.unscored)) == (3, 1, 0)
-    # IQM of three scores trims none: their mean.
-    assert table.iqm[group.label].estimate == pytest.approx((1 - 151 / 1000) / 3)
+    # A censored run's time is unobserved: no IQM or mean would do without a stand-in for it
+    # (the analysis plan), while its profile ranks it 0, below every run that succeeded.
+    assert group.label not in table.iqm and group.label not in table.mean
+    assert table.no_mean == {group.label: "1 censored: no mean"}
+    assert table.scored == [group.label]
+    assert table.profiles[group.label].fraction[0] == pytest.approx(1 / 3)  # above tau = 0
     markdown = reliable_markdown(table)
-    assert "| FuRL ρ=0.05 | 1 | 3 (1 censored → 0) |" in markdown
-    assert "1 − TTFS / 1000" in markdown and "censored → 0" in markdown
+    assert "| FuRL ρ=0.05 | 1 | 3 (1 censored) | — (1 censored: no mean) | — |" in markdown
+    assert "1 − TTFS / 1000" in markdown and "its configuration gets no IQM or mean" in markdown
+    # Without the censored run: the IQM of two scores trims none, their mean.
+    [uncensored] = group_runs([runs["a"], runs["b"]])
+    assert build_reliable_table([uncensored], "ttfs", reps=200).iqm[
+        uncensored.label].estimate == pytest.approx((1 - 151 / 1000) / 2)
     ras = build_reliable_table([group], "ras", reps=200)
     assert ras.scores[group.label].scored == 2 and ras.iqm[group.label].estimate == 0.5
     assert "3 (" not in reliable_markdown(ras) and "2 (1 incomplete)" in reliable_markdown(ras)
@@ -550,21 +558,24 @@ def test_report_cli_end_to_end(tmp_path, real_run):
     assert result.returncode == 0, result.stderr
     assert "## Configurations" in result.stdout
     for name in ("success_curves.png", "metric_sac-loss_qvalue.png", "reward_curves.png",
-                 "aggregate_ras.png", "aggregate_ttfs.png", "aggregate_tt50s.png",
-                 "performance_profiles.png", "probability_of_improvement.png"):
+                 "aggregate_ras.png", "performance_profiles.png",
+                 "probability_of_improvement.png"):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    # Every configuration has a censored TTFS and TT50S run: no IQM or mean, so no figure of them
+    assert not (out / "aggregate_ttfs.png").exists() and not (out / "aggregate_tt50s.png").exists()
+    assert "aggregate_ttfs.png" not in (out / "report.md").read_text()
     with (out / "aggregates.csv").open() as file:
         aggregates = {(row["metric"], row["configuration"]): row
                       for row in csv.DictReader(file)}
     # TTFS: SAC never succeeded in 300 episodes (score 0); FuRL's 4 runs all beat it on
     # drawer-open, the one task SAC has.
     furl = aggregates["ttfs", "FuRL ρ=0.05"]
-    assert (furl["tasks"], furl["runs_scored"], furl["censored_as_zero"]) == (
+    assert (furl["tasks"], furl["runs_scored"], furl["censored"]) == (
         "drawer-open door-open", "4", "1")
     assert (furl["p_improvement_tasks"], furl["baseline"]) == ("drawer-open", "SAC")
     # seeds 0, 1 (scores 0.849, 0.839) beat SAC's 0; seed 2 (censored, 0) ties it: 2.5 / 3
     assert float(furl["p_improvement"]) == pytest.approx(2.5 / 3)
-    assert float(aggregates["ttfs", "SAC"]["iqm"]) == 0.0
+    assert aggregates["ttfs", "SAC"]["iqm"] == "" and aggregates["ttfs", "SAC"]["censored"] == "1"
     assert float(aggregates["ras", "FuRL ρ=0.05"]["mean"]) == pytest.approx(
         ((1.0 + 70 / 150) / 2 + 1.0) / 2)  # drawer-open's 2 complete runs, door-open's 1
     with (out / "comparisons.csv").open() as file:

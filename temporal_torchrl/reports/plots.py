@@ -233,10 +233,11 @@ def _score_label(table: ReliableTable) -> str:
 def plot_aggregate_intervals(table: ReliableTable, path: Path,
                              colours: Mapping[str, tuple[float, float, float]]) -> None:
     """IQM and mean of one metric's scores per configuration, 95% CIs as bars, point estimates
-    as ticks (rliable's ``plot_interval_estimates``); the first configuration on top."""
-    labels = table.scored[::-1]
+    as ticks (rliable's ``plot_interval_estimates``); the first configuration on top. The
+    configurations without a mean (:attr:`ReliableTable.no_mean`) are left out."""
+    labels = list(table.iqm)[::-1]
     if not labels:
-        raise ValueError(f"no configuration has a scored run for {table.metric.title}: "
+        raise ValueError(f"no configuration has an IQM and a mean for {table.metric.title}: "
                          "nothing to plot.")
     points = {label: [table.iqm[label].estimate, table.mean[label].estimate] for label in labels}
     intervals = {label: np.array([[table.iqm[label].low, table.mean[label].low],

@@ -24,10 +24,13 @@ Scores are normalised to [0, 1], higher better, one per run that has the metric:
   (incomplete) and a task without a budget have no score, as in the tables.
 - TTFS, TT50S: ``score = 1 - TTFS / H`` with H = 1,000 episodes, the thesis's horizon: near 1
   for a success in the first episodes, 0 for a run that reached H without it (its TTFS is H,
-  the thesis's convention). A run stopped before H without it (*censored*, not averaged in the
-  tables) scores 0 as well: that is a lower bound (its score lies in [0, 1 - N/H] after N
-  episodes), so a configuration is never credited with episodes it did not run, and a run that
-  succeeded is ranked above every run that has not yet. The report counts these runs.
+  the thesis's convention). A run stopped before H without it (*censored*) ranks 0, below every
+  run that succeeded: the probability of improvement and the performance profiles rank it so
+  (exact in the probability of improvement when the runs of a task stop at the same episode,
+  as the studies' runs do at their budget; a lower bound in the profiles). A configuration
+  with a censored run gets no IQM and no mean (:attr:`ReliableTable.no_mean`): its score is
+  only known to lie in [0, 1 - N/H] after N episodes, and the Table 5.12 analysis plan lets no
+  mean count a stand-in for an unobserved event. The report counts these runs.
 
 A configuration's tasks are those where at least one of its runs has a score; IQM and profiles
 pool its runs over them (a task with more scored runs weighs more; with the same seeds on every
@@ -75,8 +78,10 @@ def score_rule(metric: str, horizon: int = DEFAULT_HORIZON) -> str:
                 "score")
     title = METRICS[metric].title.split(" ")[0]
     return (f"score = 1 − {title} / {horizon} (the thesis's horizon, {horizon} episodes); a run "
-            f"without the success within {horizon} episodes scores 0, and so does a run stopped "
-            f"before {horizon} episodes without it (censored → 0, a lower bound of its score)")
+            f"without the success within {horizon} episodes scores 0; a run stopped before "
+            f"{horizon} episodes without it (censored) ranks 0 in the probability of "
+            f"improvement and the profiles, and its configuration gets no IQM or mean (no "
+            f"mean counts a stand-in for an unobserved time)")
 
 
 @dataclass(frozen=True)
@@ -262,8 +267,9 @@ class ReliableTable:
         metric: the metric (its title, direction).
         horizon: H of the TTFS / TT50S scores.
         scores: ``label -> Scores`` for every configuration, in the report's order.
-        iqm, mean: ``label -> Interval`` for the configurations with a scored run.
-        profiles: ``label -> Profile`` likewise.
+        iqm, mean: ``label -> Interval`` for the configurations with a scored run and no
+            censored one.
+        profiles: ``label -> Profile`` for the configurations with a scored run.
         baseline: the baseline's label.
         improvements: ``label -> Improvement`` over the baseline for the other scored
             configurations; empty when the baseline has no score (``no_baseline`` says why).
@@ -288,7 +294,13 @@ class ReliableTable:
     @property
     def scored(self) -> list[str]:
         """Labels of the configurations with at least one scored run."""
-        return list(self.iqm)
+        return list(self.profiles)
+
+    @property
+    def no_mean(self) -> dict[str, str]:
+        """``label -> why`` for the scored configurations without an IQM and a mean."""
+        return {label: f"{self.scores[label].censored} censored: no mean"
+                for label in self.profiles if label not in self.iqm}
 
 
 def build_reliable_table(groups: Sequence[RunGroup], metric: str, *,
@@ -310,16 +322,17 @@ def build_reliable_table(groups: Sequence[RunGroup], metric: str, *,
     iqm, mean, profiles = {}, {}, {}
     for label, each in scores.items():
         if each.per_task:
-            iqm[label], mean[label] = aggregate_intervals(each, reps=reps, seed=seed)
+            if not each.censored:
+                iqm[label], mean[label] = aggregate_intervals(each, reps=reps, seed=seed)
             profiles[label] = performance_profile(each, reps=reps, seed=seed)
     improvements, no_baseline = {}, None
     if baseline not in scores:
         no_baseline = (f"no configuration is labelled {baseline!r} (configurations: "
                        f"{', '.join(scores) or 'none'}); choose one with --baseline")
-    elif baseline not in iqm:
+    elif baseline not in profiles:
         no_baseline = f"{baseline} has no scored run for {METRICS[metric].title}"
     else:
-        for label in iqm:
+        for label in profiles:
             if label != baseline:
                 improvements[label] = probability_of_improvement(
                     scores[label], scores[baseline], reps=reps, seed=seed)

@@ -69,7 +69,7 @@ CSV_COLUMNS = ("task", "configuration", "runs", "n", "mean", "std", "median", "r
                "censored", "censored_episodes", "best", "status", "pending", "without_value",
                "published_tables", "published_mean", "published_std", "note",
                *DIFFERENCE_COLUMNS, "std_assumed", "reading")
-RELIABLE_COLUMNS = ("metric", "kind", "configuration", "tasks", "runs_scored", "censored_as_zero",
+RELIABLE_COLUMNS = ("metric", "kind", "configuration", "tasks", "runs_scored", "censored",
                     "unscored", "incomplete", "without_budget", "iqm", "iqm_ci95_low",
                     "iqm_ci95_high", "mean", "mean_ci95_low", "mean_ci95_high", "baseline",
                     "p_improvement", "p_improvement_ci95_low", "p_improvement_ci95_high",
@@ -388,7 +388,7 @@ def reliable_rows(table: ReliableTable) -> Table:
         rows.append({
             "metric": table.metric.name, "kind": CONFIGURATION_ROW, "configuration": label,
             "tasks": " ".join(scores.tasks), "runs_scored": scores.scored,
-            "censored_as_zero": scores.censored, "unscored": len(scores.unscored),
+            "censored": scores.censored, "unscored": len(scores.unscored),
             "incomplete": sum(run.status == INCOMPLETE for run in scores.unscored),
             "without_budget": sum(run.status == UNDEFINED for run in scores.unscored),
             **interval_fields("iqm", table.iqm.get(label)),
@@ -407,15 +407,22 @@ def reliable_rows(table: ReliableTable) -> Table:
 
 
 def _runs_text(row: Row) -> str:
-    """``4``, ``4 (1 censored → 0)``, ``0 (2 incomplete)``."""
+    """``4``, ``4 (1 censored)``, ``0 (2 incomplete)``."""
     notes = []
-    if row["censored_as_zero"]:
-        notes.append(f"{row['censored_as_zero']} censored → 0")
+    if row["censored"]:
+        notes.append(f"{row['censored']} censored")
     if row["incomplete"]:
         notes.append(f"{row['incomplete']} incomplete")
     if row["without_budget"]:
         notes.append(f"{row['without_budget']} without RAS budget")
     return f"{row['runs_scored']}" + (f" ({', '.join(notes)})" if notes else "")
+
+
+def _iqm_text(row: Row) -> str:
+    """The IQM's interval, or why there is none: ``— (1 censored: no mean)``."""
+    if row.get("iqm") is None and row["censored"]:
+        return f"{EMPTY_CELL} ({row['censored']} censored: no mean)"
+    return interval_text(row, "iqm")
 
 
 def _improvement_text(row: Row) -> str:
@@ -440,7 +447,7 @@ def reliable_markdown(table: ReliableTable) -> str:
     columns = [field_column("Configuration", "configuration"),
                Column("Tasks", lambda row: str(len(row["tasks"].split()))),
                Column("Runs scored", _runs_text),
-               Column("IQM [95% CI]", lambda row: interval_text(row, "iqm")),
+               Column("IQM [95% CI]", _iqm_text),
                Column("Mean [95% CI]", lambda row: interval_text(row, "mean"))]
     if table.no_baseline is None:
         columns.append(Column(f"P(X > {baseline}) [95% CI]", _improvement_text))
@@ -457,6 +464,10 @@ def reliable_markdown(table: ReliableTable) -> str:
     parts[-1] += (f" 95% stratified-bootstrap CIs (runs resampled within each task, "
                   f"{table.reps} resamples, seed {table.seed}); with one run per task an "
                   f"interval is its point.")
+    if table.no_mean:
+        parts[-1] += (" A configuration with a censored run has no IQM and no mean: its "
+                      "unobserved times would need a stand-in (the analysis plan allows none); "
+                      "its runs still enter the probabilities of improvement and the profiles.")
     if table.no_baseline is not None:
         parts += ["", f"No probability of improvement: {table.no_baseline}."]
     unmatched = [row for row in rows.rows if row["kind"] == CONFIGURATION_ROW
