@@ -35,7 +35,8 @@ and writes into ``--out``:
 - ``primary_claim.md``/``.csv`` with ``--primary X Y`` (and ``--secondary``): a registered
   plan's test of X against Y over the tasks (:mod:`temporal_torchrl.reports.primary_claim`),
   on the ``--planned-seeds`` only (which the thesis-table page, the aggregates and the
-  comparisons then keep to as well);
+  comparisons then keep to as well; the per-metric tables judge a cell against the thesis only
+  once it has each planned seed);
 - ``runs.csv``: every run with its episodes and metrics (or why it has none yet);
 - ``success_curves.png``: running-average success (window 150) per task and configuration;
 - ``evaluation.md``/``.csv`` and ``evaluation_curves.png``, only when some runs evaluated their
@@ -180,8 +181,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the seeds a plan fixed: runs of other seeds were added after "
                              "looking, and the --thesis-table page, the primary claim, the "
                              "rliable aggregates and the per-task comparisons leave them out "
-                             "(the per-metric tables keep them; default: every seed; the claim: "
-                             "0 1 2 3)")
+                             "(the per-metric tables keep them, and judge a cell against the "
+                             "thesis only once it has every planned seed; default: every seed; "
+                             "the claim: 0 1 2 3)")
     parser.add_argument("--thesis-table", default=None, metavar="NUMBER",
                         help="lay the runs out as this thesis table (e.g. 5.12), ours beside "
                              "the thesis, and lead the report with it")
@@ -280,7 +282,7 @@ def main(argv: list[str] | None = None) -> None:
 
     tables = {}
     for metric in METRICS:
-        table = tables[metric] = build_table(groups, metric)
+        table = tables[metric] = build_table(groups, metric, args.planned_seeds)
         sections.append(write_table(args.out, metric, table_markdown(table),
                                     metric_rows(table)))
     runs = run_rows(groups, args.dirs)

@@ -289,6 +289,23 @@ def test_published_value_matched_and_difference(tmp_path):
     assert "does not state this column's baseline" in table_markdown(ttfs)
 
 
+def test_a_cell_without_every_planned_seed_is_shown_not_judged(tmp_path):
+    make_run(tmp_path, "s0", SEED0, *FURL, "env.seed=0", "encoder.name=metaworld_small")
+    make_run(tmp_path, "s1", SEED1, *FURL, "env.seed=1", "encoder.name=metaworld_small")
+    groups = group_runs(find_runs([tmp_path]))
+    judged = rows_by(build_table(groups, "ras", planned_seeds=[0, 1]), "drawer-open")
+    running = rows_by(build_table(groups, "ras", planned_seeds=[0, 1, 2, 3]), "drawer-open")
+    label = "FuRL ρ=0.05"
+    assert judged[label]["reading"] == "not resolved"
+    assert running[label]["reading"] == ""  # 2 of the 4 planned seeds: not judged
+    assert running[label]["difference"] == judged[label]["difference"]  # still shown
+    assert running[label]["note"] == ("still running (no run yet of planned seeds 2, 3): "
+                                      "shown, not judged; encoder metaworld_small (thesis: liv)")
+    markdown = table_markdown(build_table(groups, "ras", planned_seeds=[0, 1, 2, 3]))
+    assert "| 73.3 ± 37.7 (n=2) | 41.7 | +31.6 | 5.4, 5.5, 5.6 |" in markdown
+    assert "not resolved" not in markdown
+
+
 # --------------------------------------------------------------------------- rliable aggregates
 def hand_scores(label: str, *tasks: list[float]) -> Scores:
     """Scores of one configuration: one list of run scores per task."""

@@ -202,6 +202,9 @@ class MetricTable:
         averages: ``label -> mean of the task means`` for configurations complete on every
             task.
         published: ``label -> PublishedResult`` for configurations the thesis reports.
+        planned_seeds: the seeds of the analysis plan, if any: a cell is then judged against
+            the thesis only once it has a run of each (a cell still running is shown, not
+            judged, and not counted among the cells compared).
     """
 
     metric: Metric
@@ -210,6 +213,16 @@ class MetricTable:
     cells: dict[tuple[str, str], Cell]
     averages: dict[str, float]
     published: dict[str, PublishedResult]
+    planned_seeds: tuple[int, ...] | None = None
+
+    def missing_seeds(self, task: str, label: str) -> tuple[int, ...]:
+        """The planned seeds the cell ``(task, label)`` has no run of yet (none without a
+        plan)."""
+        if self.planned_seeds is None:
+            return ()
+        cell = self.cells.get((task, label))
+        have = {value.run.seed for value in cell.runs} if cell is not None else set()
+        return tuple(seed for seed in self.planned_seeds if seed not in have)
 
     def best(self, task: str | None) -> set[str]:
         """Labels with the best complete value of a row (``None``: the Average row); values
@@ -236,7 +249,8 @@ class MetricTable:
             for task in self.tasks:
                 cell = self.cells.get((task, group.label))
                 if result is None or cell is None or task not in result.cells \
-                        or not cell.comparable_with(result.cells[task]):
+                        or not cell.comparable_with(result.cells[task]) \
+                        or self.missing_seeds(task, group.label):
                     continue
                 compared.append(((task, group.label), cell, result.cells[task]))
         return {key: compare_with_thesis(cell.values, published.mean, published.std,
@@ -245,8 +259,10 @@ class MetricTable:
                 for key, cell, published in compared}
 
 
-def build_table(groups: Sequence[RunGroup], metric: str) -> MetricTable:
-    """The table of ``metric`` over ``groups`` (see module doc)."""
+def build_table(groups: Sequence[RunGroup], metric: str,
+                planned_seeds: Sequence[int] | None = None) -> MetricTable:
+    """The table of ``metric`` over ``groups`` (see module doc); with ``planned_seeds``, a
+    cell is compared with the thesis only once it has a run of each."""
     tasks = tuple(order_tasks(run.task for group in groups for run in group.runs))
     cells, averages, published = {}, {}, {}
     for group in groups:
@@ -258,4 +274,5 @@ def build_table(groups: Sequence[RunGroup], metric: str) -> MetricTable:
         result = find_published(Configuration.from_settings(group.settings), metric)
         if result is not None:
             published[group.label] = result
-    return MetricTable(METRICS[metric], tasks, tuple(groups), cells, averages, published)
+    return MetricTable(METRICS[metric], tasks, tuple(groups), cells, averages, published,
+                       None if planned_seeds is None else tuple(sorted(planned_seeds)))

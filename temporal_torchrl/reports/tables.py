@@ -190,8 +190,13 @@ def published_text(mean: float, std: float | None, decimals: int) -> str:
     return text if std is None else f"{text} ± {_number(std, decimals)}"
 
 
-def _notes(table: MetricTable, group: RunGroup) -> str:
+def _notes(table: MetricTable, group: RunGroup, task: str | None = None) -> str:
+    """The row's notes; ``task``: a cell's row (``None``: the Average row)."""
     notes = []
+    missing = table.missing_seeds(task, group.label) if task is not None else ()
+    if missing:
+        notes.append(f"still running (no run yet of planned seed{'s' if len(missing) > 1 else ''}"
+                     f" {', '.join(map(str, missing))}): shown, not judged")
     encoder = group.settings.get("encoder.name")
     if has_vlm_reward(group.settings.get("reward.positional"),
                       group.settings.get("reward.directional")) and encoder != PUBLISHED_ENCODER:
@@ -220,7 +225,7 @@ def metric_rows(table: MetricTable) -> Table:
                 comparison = comparisons.get((task, group.label))
                 row.update({"published_tables": " ".join(result.tables),
                             "published_mean": published.mean, "published_std": published.std,
-                            "note": _notes(table, group),
+                            "note": _notes(table, group, task),
                             "difference": (cell.mean - published.mean
                                            if cell.complete else None),
                             **difference_fields(comparison)})
