@@ -29,7 +29,7 @@ from temporal_torchrl.reports import (
     run_value,
 )
 from temporal_torchrl.reports.aggregate import CENSORED, INCOMPLETE
-from temporal_torchrl.reports.groups import distinguishing_keys
+from temporal_torchrl.reports.groups import distinguishing_keys, missing_seeds
 from temporal_torchrl.reports.logs import csv_scalars
 from temporal_torchrl.reports.reliable import (
     Scores,
@@ -304,6 +304,14 @@ def test_a_cell_without_every_planned_seed_is_shown_not_judged(tmp_path):
     markdown = table_markdown(build_table(groups, "ras", planned_seeds=[0, 1, 2, 3]))
     assert "| 73.3 ± 37.7 (n=2) | 41.7 | +31.6 | 5.4, 5.5, 5.6 |" in markdown
     assert "not resolved" not in markdown
+
+
+def test_missing_seeds_names_the_planned_seeds_with_no_run_in_plan_order(tmp_path):
+    make_run(tmp_path, "s1", SEED1, *FURL, "env.seed=1")
+    runs = find_runs([tmp_path])
+    assert missing_seeds(runs, [3, 1, 0]) == (3, 0)
+    assert missing_seeds(runs, None) == ()  # no plan: nothing is missing
+    assert missing_seeds([], [0]) == (0,)
 
 
 # --------------------------------------------------------------------------- rliable aggregates

@@ -37,7 +37,7 @@ from temporal_torchrl.protocol_metrics import (
     ras,
     time_to_successes,
 )
-from temporal_torchrl.reports.groups import RunGroup, order_tasks
+from temporal_torchrl.reports.groups import RunGroup, missing_seeds, order_tasks
 from temporal_torchrl.reports.published import (
     Configuration,
     PublishedCell,
@@ -218,11 +218,9 @@ class MetricTable:
     def missing_seeds(self, task: str, label: str) -> tuple[int, ...]:
         """The planned seeds the cell ``(task, label)`` has no run of yet (none without a
         plan)."""
-        if self.planned_seeds is None:
-            return ()
         cell = self.cells.get((task, label))
-        have = {value.run.seed for value in cell.runs} if cell is not None else set()
-        return tuple(seed for seed in self.planned_seeds if seed not in have)
+        return missing_seeds([value.run for value in cell.runs] if cell is not None else [],
+                             self.planned_seeds)
 
     def best(self, task: str | None) -> set[str]:
         """Labels with the best complete value of a row (``None``: the Average row); values

@@ -157,6 +157,15 @@ def planned_runs(groups: Sequence[RunGroup],
     return [group for group in planned if group.runs], after
 
 
+def missing_seeds(runs: Iterable[Run], planned: Iterable[int] | None) -> tuple[int, ...]:
+    """The ``planned`` seeds (a plan's, in order) that ``runs`` hold no run of; none without a
+    plan. A cell with one missing is still running: shown, not judged."""
+    if planned is None:
+        return ()
+    have = {run.seed for run in runs}
+    return tuple(seed for seed in planned if seed not in have)
+
+
 def task_order(task: str) -> tuple[int, str]:
     """Sort key: the thesis's six tasks in its order, then any other task alphabetically."""
     return ((EVALUATION_TASKS.index(task), "") if task in EVALUATION_TASKS

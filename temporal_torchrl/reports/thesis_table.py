@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from temporal_torchrl.reports.aggregate import METRICS, Cell, Metric, make_cell
-from temporal_torchrl.reports.groups import RunGroup, planned_runs
+from temporal_torchrl.reports.groups import RunGroup, missing_seeds, planned_runs
 from temporal_torchrl.reports.published import (
     PUBLISHED_ENCODER,
     Configuration,
@@ -140,8 +140,7 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str,
         cell = cells.get((task, column.key))
         if cell is None or not cell.comparable_with(table.rows[task][column.index]):
             return False
-        return planned_seeds is None or set(planned_seeds) <= {
-            value.run.seed for value in cell.runs}
+        return not missing_seeds([value.run for value in cell.runs], planned_seeds)
 
     compared = [(task, key) for task, key in cells if comparable(task, by_key[key])]
     comparisons = {}
