@@ -142,6 +142,11 @@ class Cell:
     time_to_event: TimeToEvent | None = None
 
     @property
+    def seeds(self) -> set[int]:
+        """The seeds of its runs, with a value or not."""
+        return {value.run.seed for value in self.runs}
+
+    @property
     def values(self) -> list[float]:
         """The runs' values (censored and pending runs have none)."""
         return [run.value for run in self.runs if run.status == VALUE]
@@ -219,8 +224,7 @@ class MetricTable:
         """The planned seeds the cell ``(task, label)`` has no run of yet (none without a
         plan)."""
         cell = self.cells.get((task, label))
-        return missing_seeds([value.run for value in cell.runs] if cell is not None else [],
-                             self.planned_seeds)
+        return missing_seeds(cell.seeds if cell is not None else (), self.planned_seeds)
 
     def best(self, task: str | None) -> set[str]:
         """Labels with the best complete value of a row (``None``: the Average row); values

@@ -157,12 +157,12 @@ def planned_runs(groups: Sequence[RunGroup],
     return [group for group in planned if group.runs], after
 
 
-def missing_seeds(runs: Iterable[Run], planned: Iterable[int] | None) -> tuple[int, ...]:
-    """The ``planned`` seeds (a plan's, in order) that ``runs`` hold no run of; none without a
+def missing_seeds(seeds: Iterable[int], planned: Iterable[int] | None) -> tuple[int, ...]:
+    """The ``planned`` seeds (a plan's, in order) not among the ``seeds`` run; none without a
     plan. A cell with one missing is still running: shown, not judged."""
     if planned is None:
         return ()
-    have = {run.seed for run in runs}
+    have = set(seeds)
     return tuple(seed for seed in planned if seed not in have)
 
 

@@ -140,7 +140,7 @@ def build_thesis_table(groups: Sequence[RunGroup], number: str,
         cell = cells.get((task, column.key))
         if cell is None or not cell.comparable_with(table.rows[task][column.index]):
             return False
-        return not missing_seeds([value.run for value in cell.runs], planned_seeds)
+        return not missing_seeds(cell.seeds, planned_seeds)
 
     compared = [(task, key) for task, key in cells if comparable(task, by_key[key])]
     comparisons = {}
