@@ -4,6 +4,8 @@ composes a recipe's config (the recipes are importable through pytest's ``python
 pyproject.toml)."""
 
 import os
+import sys
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("WANDB_MODE", "offline")
@@ -24,6 +26,22 @@ torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 @pytest.fixture(autouse=True)
 def _seed_torch():
     torch.manual_seed(0)
+
+
+@pytest.fixture
+def example_reward_module() -> Path:
+    """examples/my_directional_reward.py, which registers d_sharp and d3_decay when a test loads
+    it (by the recipe's ``reward.modules`` or by hand): both unregistered afterwards and the module
+    forgotten, so the registry is left as it was found."""
+    from temporal_torchrl.rewards import DIRECTIONAL, unregister_reward
+    loaded = set(sys.modules)
+    yield Path(__file__).resolve().parents[1] / "examples" / "my_directional_reward.py"
+    for name in ("d_sharp", "d3_decay"):
+        if name in DIRECTIONAL:
+            unregister_reward(name)
+    for name in set(sys.modules) - loaded:
+        if name.startswith("reward_module_"):
+            del sys.modules[name]
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -229,23 +229,6 @@ def test_an_older_run_resumes_with_the_current_defaults_for_its_missing_keys(tmp
         validate_recipe_config(resumed_config(current, tmp_path, given_keys={"resume"}))
 
 
-@pytest.fixture
-def example_reward_module():
-    """examples/my_directional_reward.py, which registers d_sharp and d3_decay; unregistered
-    afterwards."""
-    import sys
-
-    from temporal_torchrl.rewards import DIRECTIONAL, unregister_reward
-    loaded = set(sys.modules)
-    yield RECIPES.parent / "examples" / "my_directional_reward.py"
-    for name in ("d_sharp", "d3_decay"):
-        if name in DIRECTIONAL:
-            unregister_reward(name)
-    for name in set(sys.modules) - loaded:
-        if name.startswith("reward_module_"):
-            del sys.modules[name]
-
-
 def test_reward_options_are_those_the_configured_rewards_declare(example_reward_module):
     with pytest.raises(ValueError, match=r"config reward\.options\.sharpness=4 is invalid: "
                                          r"expected an option of furl or d3: they declare none"):

@@ -15,7 +15,6 @@ from tensordict import TensorDict
 from temporal_torchrl.data import EpisodeReplayBuffer, episode_rows
 from temporal_torchrl.objectives import DirectionalLoss, finetuning_losses
 from temporal_torchrl.rewards import (
-    DIRECTIONAL,
     POSITIONAL,
     TemporalReward,
     reward_from_config,
@@ -48,20 +47,6 @@ def no_p5():
     yield
     if "p5" in POSITIONAL:
         unregister_reward("p5")
-    for name in set(sys.modules) - loaded:
-        if name.startswith("reward_module_"):
-            del sys.modules[name]
-
-
-@pytest.fixture
-def d_sharp():
-    """examples/my_directional_reward.py registers "d_sharp" and "d3_decay": its module (the
-    recipe's import of the file), and the registry left as it was found."""
-    loaded = set(sys.modules)
-    yield
-    for name in ("d_sharp", "d3_decay"):
-        if name in DIRECTIONAL:
-            unregister_reward(name)
     for name in set(sys.modules) - loaded:
         if name.startswith("reward_module_"):
             del sys.modules[name]
@@ -101,7 +86,7 @@ def test_own_encoder(capsys):
     assert "bag_of_words_state: embedding (5, 64)" in capsys.readouterr().out
 
 
-def test_own_directional_reward_with_its_options_in_the_recipe(tmp_path, d_sharp):
+def test_own_directional_reward_with_its_options_in_the_recipe(tmp_path, example_reward_module):
     """The extending guide's command: ``reward.modules=[examples/my_directional_reward.py]
     reward.directional=d_sharp +reward.options.sharpness=4 +reward.options.margin=0.2``."""
     with initialize_config_dir(config_dir=str(ROOT / "recipes"), version_base=None):
@@ -122,7 +107,7 @@ def test_own_directional_reward_with_its_options_in_the_recipe(tmp_path, d_sharp
                                                         "MarginDirectionalLoss"]
 
 
-def test_own_loss_of_the_directional_example_by_hand(d_sharp):
+def test_own_loss_of_the_directional_example_by_hand(example_reward_module):
     """d_sharp's MarginDirectionalLoss on a stage-2 batch: the hinge of each group, written
     out with the reward function and the options the reward was given."""
     namespace = runpy.run_path(str(EXAMPLES / "my_directional_reward.py"))
@@ -159,7 +144,7 @@ def test_own_loss_of_the_directional_example_by_hand(d_sharp):
     assert all(parameter.grad is not None for parameter in loss.parameters())
 
 
-def test_a_built_in_loss_plus_one_term_through_terms(d_sharp):
+def test_a_built_in_loss_plus_one_term_through_terms(example_reward_module):
     """The extending guide's DecayedDirectionalLoss (d3_decay): the built-in directional loss's
     terms, unchanged, plus ``loss_decay``, all summed into ``loss_directional``; one trainer
     update changes the heads and reports the new term."""
