@@ -5,6 +5,7 @@ pyproject.toml)."""
 
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -29,7 +30,7 @@ def _seed_torch():
 
 
 @pytest.fixture
-def example_reward_module() -> Path:
+def example_reward_module() -> Iterator[Path]:
     """examples/my_directional_reward.py, which registers d_sharp and d3_decay when a test loads
     it (by the recipe's ``reward.modules`` or by hand): both unregistered afterwards and the module
     forgotten, so the registry is left as it was found."""

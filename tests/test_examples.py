@@ -91,7 +91,7 @@ def test_own_directional_reward_with_its_options_in_the_recipe(tmp_path, example
     reward.directional=d_sharp +reward.options.sharpness=4 +reward.options.margin=0.2``."""
     with initialize_config_dir(config_dir=str(ROOT / "recipes"), version_base=None):
         cfg = compose("config", overrides=[
-            *TINY_RUN, f"reward.modules=[{EXAMPLES / 'my_directional_reward.py'}]",
+            *TINY_RUN, f"reward.modules=[{example_reward_module}]",
             "reward.directional=d_sharp", "+reward.options.sharpness=4",
             "+reward.options.margin=0.2", f"output_dir={tmp_path / 'run'}"])
     summary = sac_temporal.train(cfg)
@@ -110,7 +110,7 @@ def test_own_directional_reward_with_its_options_in_the_recipe(tmp_path, example
 def test_own_loss_of_the_directional_example_by_hand(example_reward_module):
     """d_sharp's MarginDirectionalLoss on a stage-2 batch: the hinge of each group, written
     out with the reward function and the options the reward was given."""
-    namespace = runpy.run_path(str(EXAMPLES / "my_directional_reward.py"))
+    namespace = runpy.run_path(str(example_reward_module))
     gen = torch.Generator().manual_seed(3)
     dim, count = 6, 5
     reward = TemporalReward(dim, torch.randn(dim, generator=gen), torch.randn(dim, generator=gen),
@@ -148,7 +148,7 @@ def test_a_built_in_loss_plus_one_term_through_terms(example_reward_module):
     """The extending guide's DecayedDirectionalLoss (d3_decay): the built-in directional loss's
     terms, unchanged, plus ``loss_decay``, all summed into ``loss_directional``; one trainer
     update changes the heads and reports the new term."""
-    namespace = runpy.run_path(str(EXAMPLES / "my_directional_reward.py"))
+    namespace = runpy.run_path(str(example_reward_module))
     torch.manual_seed(4)
     dim = 4
     reward = TemporalReward(dim, torch.randn(dim), torch.randn(dim), positional=None,
